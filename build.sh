@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# softshell's one entry point for building: installs what is missing (Debian packages), configures,
+# builds and runs.
+#
+#   ./build.sh demo [demo options]   build and run softshell-demo on the embedded server
+#   ./build.sh test                  build everything and run every test (ctest)
+#   ./build.sh build                 only build
+#   ./build.sh deps                  only install the Debian packages
+#
+# Environment: BUILD_DIR (default: build), BUILD_TYPE (default: RelWithDebInfo), JOBS (default:
+# the number of cores), CMAKE_ARGS (extra cmake arguments), SOFTSHELL_NO_APT=1 to skip apt-get.
+set -euo pipefail
+cd "$(dirname "$0")"
+
+PACKAGES=(
+  g++ cmake ninja-build pkg-config git ca-certificates
+  libeigen3-dev libosd-dev libsuitesparse-dev libbullet-dev
+  libcpp-httplib-dev nlohmann-json3-dev libssl-dev libstb-dev
+  libgtest-dev libgmock-dev
+)
+
+install_deps() {
+  [ "${SOFTSHELL_NO_APT:-0}" = 1 ] && return 0
+  local missing=()
+  for p in "${PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  echo "build.sh: installing ${missing[*]}" >&2
+  local sudo=""
+  if [ "$(id -u)" != 0 ]; then
+    command -v sudo >/dev/null || { echo "build.sh: need root or sudo to install: ${missing[*]}" >&2; exit 1; }
+    sudo="sudo"
+  fi
+  $sudo env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+  $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+}
+
+BUILD_DIR=${BUILD_DIR:-build}
+JOBS=${JOBS:-$(nproc)}
+
+configure() {
+  local launcher=()
+  command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
+  # shellcheck disable=SC2086
+  cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-RelWithDebInfo}" "${launcher[@]}" ${CMAKE_ARGS:-} >/dev/null
+}
+
+cmd=${1:-help}
+[ $# -gt 0 ] && shift
+case "$cmd" in
+  deps) install_deps ;;
+  build) install_deps; configure; cmake --build "$BUILD_DIR" -j "$JOBS" ;;
+  demo)
+    install_deps; configure
+    cmake --build "$BUILD_DIR" -j "$JOBS" --target softshell-demo
+    "$BUILD_DIR/demo_headless/softshell-demo" "$@"
+    ;;
+  test)
+    install_deps; configure
+    cmake --build "$BUILD_DIR" -j "$JOBS"
+    ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" "$@"
+    ;;
+  *) sed -n '2,13p' "$0"; [ "$cmd" = help ] || exit 2 ;;
+esac

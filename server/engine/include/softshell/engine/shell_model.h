@@ -1,0 +1,102 @@
+#pragma once
+/// \file
+/// \brief `ShellModel`: the precomputed isogeometric Kirchhoff-Love shell of one geometry
+/// (quadrature basis and stiffness matrix K). Immutable once built; shared by every solve.
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+
+#include <Eigen/SparseCore>
+
+#include "softshell/control_mesh.h"
+#include "softshell/deformation.h"
+#include "softshell/limit_evaluator.h"
+#include "softshell/material.h"
+#include "softshell/result.h"
+
+namespace softshell::engine {
+
+/// How the shell is integrated (see README "Quadrature" for the accuracy/cost table).
+struct QuadratureOptions {
+  /// Gauss points per direction on every (sub-)cell: 4 integrates a bicubic patch's stiffness
+  /// integrand well (GeoPDEs uses p + 1). Range 1..10.
+  int gauss_points = 4;
+  /// Dyadic refinement levels of a face's domain toward an extraordinary vertex (0 = none). The
+  /// basis there is piecewise polynomial on sub-squares that shrink toward the vertex. Range 0..8.
+  int ev_refinement_levels = 3;
+};
+
+/// Options of the precomputation.
+struct PrecomputeOptions {
+  QuadratureOptions quadrature;
+  LimitEvaluator::Options evaluator;
+  /// Worker threads for the per-face work; 0 = std::thread::hardware_concurrency(). The result
+  /// is bit-for-bit the same for every thread count.
+  int threads = 0;
+  /// Called with the fraction done in [0, 1], from one of the worker threads. May be empty.
+  std::function<void(double)> progress;
+  /// If set and becomes true, the build stops with kCancelled.
+  const std::atomic<bool>* cancel = nullptr;
+};
+
+/// One quadrature point of the limit surface, with its basis (for loads and stresses).
+struct QuadraturePoint {
+  SurfacePoint point;
+  double weight = 0.0;  ///< Gauss weight times the area of its cell in the (sub-)face domain
+};
+
+/// The precomputed shell of one geometry: limit evaluator, quadrature points and the sparse
+/// symmetric stiffness matrix K (3n x 3n, DOF 3i + a is axis a of control point i).
+///
+/// Thread-safety: immutable after `build`; every const member may be called concurrently.
+class ShellModel {
+ public:
+  /// Validates mesh and material, evaluates the basis at every quadrature point and assembles K.
+  static Result<std::shared_ptr<const ShellModel>> build(const ControlMesh& mesh, const Material& material,
+                                                         const PrecomputeOptions& options = {});
+
+  const ControlMesh& mesh() const { return evaluator_.mesh(); }
+  const Material& material() const { return material_; }
+  const LimitEvaluator& evaluator() const { return evaluator_; }
+  const PrecomputeOptions& options() const { return options_; }
+  int32_t num_control_points() const { return mesh().num_vertices(); }
+  int32_t num_dofs() const { return 3 * num_control_points(); }
+
+  /// K, full symmetric (both triangles stored), column-major (CSC).
+  const Eigen::SparseMatrix<double>& stiffness() const { return stiffness_; }
+
+  /// The quadrature points of every face (for loads and stresses).
+  const std::vector<QuadraturePoint>& quadrature() const { return quadrature_; }
+
+  /// Total area of the limit surface (sum over quadrature points).
+  double area() const { return area_; }
+
+  /// Strain energy 1/2 u^T K u of a displacement vector (3n).
+  double strain_energy(const Eigen::VectorXd& displacement) const;
+
+  /// The load vector (3n) of a request's forces, surface forces, surface load and pressure.
+  /// Throws Exception(kInvalidArgument) for an index or surface point out of range.
+  Eigen::VectorXd load_vector(const DeformationRequest& request) const;
+
+  /// Bytes held (matrix, quadrature, evaluator estimate).
+  size_t memory_bytes() const;
+
+  /// Seconds the build took.
+  double build_seconds() const { return build_seconds_; }
+
+ private:
+  ShellModel(LimitEvaluator evaluator, Material material, PrecomputeOptions options);
+  friend class ShellModelBuilder;
+
+  LimitEvaluator evaluator_;
+  Material material_;
+  PrecomputeOptions options_;
+  Eigen::SparseMatrix<double> stiffness_;
+  std::vector<QuadraturePoint> quadrature_;
+  double area_ = 0.0;
+  double build_seconds_ = 0.0;
+};
+
+}  // namespace softshell::engine
