@@ -324,9 +324,11 @@ void write_geometry_info(JsonOut& out, const GeometryInfo& info) {
 // ---------------------------------------------------------------------------------------------
 // Errors
 
-std::string encode_error_json(const Error& error) {
+std::string encode_error_json(const Error& error) { return encode_error_json(to_string(error.code), error.message); }
+
+std::string encode_error_json(std::string_view code, std::string_view message) {
   JsonOut out;
-  out.raw("{\"error\":").string(to_string(error.code)).raw(",\"message\":").string(error.message).raw("}");
+  out.raw("{\"error\":").string(code).raw(",\"message\":").string(message).raw("}");
   return out.take();
 }
 

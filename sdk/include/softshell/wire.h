@@ -61,6 +61,9 @@ ErrorCode error_code_for_status(int status);
 
 /// `{"error": "<short code>", "message": "..."}`.
 std::string encode_error_json(const Error& error);
+/// The same with any short code (for HTTP-level errors without an `ErrorCode`, such as
+/// "method_not_allowed").
+std::string encode_error_json(std::string_view code, std::string_view message);
 /// The error in an error response. Falls back to the status's code and the raw body (shortened)
 /// when the body is not the JSON error layout.
 Error decode_error_json(std::string_view body, int http_status);
