@@ -380,6 +380,10 @@ void Service::shutdown() {
 }
 
 Result<UploadResult> Service::upload(ControlMesh mesh, Material material, std::string name_space) {
+  return guarded([&] { return upload_checked(std::move(mesh), material, std::move(name_space)); });
+}
+
+Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& material, std::string name_space) {
   if (impl_->stopping.load()) return shutdown_error();
   if (auto ok = check_namespace(name_space); !ok) return ok.error();
   const GeomId id = geometry_id(mesh, material, name_space);

@@ -151,6 +151,7 @@ class Service {
   bool shutting_down() const;
 
  private:
+  Result<UploadResult> upload_checked(ControlMesh mesh, const Material& material, std::string name_space);
   struct Impl;
   ServiceOptions options_;
   std::unique_ptr<Impl> impl_;
