@@ -506,10 +506,6 @@ struct HttpServer::Impl {
     }
     p.face = static_cast<int32_t>(face);
     p.subface = static_cast<int32_t>(subface);
-    if (p.u < 0 || p.u > 1 || p.v < 0 || p.v > 1) {
-      throw Exception(ErrorCode::kInvalidArgument, "u and v must lie in [0, 1], got u = " + req.get_param_value("u") +
-                                                       ", v = " + req.get_param_value("v"));
-    }
     const LimitComb comb = value_or_throw(service->limit_comb(id, p));
     if (reply_format(req, wire::Format::kJson) == wire::Format::kBinary) {
       auto body = wire::encode_limit_comb_binary(comb);
