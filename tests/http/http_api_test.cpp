@@ -42,7 +42,7 @@ TEST(HttpApiTest, HealthAndMetrics) {
   EXPECT_EQ(m.status, 200);
   EXPECT_EQ(m.content_type.rfind("text/plain", 0), 0u);
   for (const char* family :
-       {"softshell_http_requests_total{endpoint=\"GET /health\",status=\"200\"} 1",
+       {"softshell_http_requests_total{endpoint=\"GET /health\",status=\"200\"} 2",  // TestServer + the test
         "softshell_http_request_duration_seconds_bucket{endpoint=\"POST /geometries\",le=\"+Inf\"} 1",
         "softshell_geometries{status=\"ready\"} 1", "softshell_results 0", "softshell_precomputations_running 0",
         "softshell_factor_cache_bytes", "softshell_store_bytes", "softshell_solve_duration_seconds_count 0"}) {

@@ -44,6 +44,13 @@ class TestServer {
     auto bound = server_.start("127.0.0.1", 0);
     if (!bound) throw Exception(bound.error());
     port_ = *bound;
+    // One request from this thread first. cpp-httplib's client initializes function-local
+    // statics (regexes) on first use inside its uninstrumented shared library; doing that here,
+    // before a test starts threads, orders it before every later use for ThreadSanitizer (whose
+    // view of the library's inlined static-guard checks is otherwise incomplete).
+    auto warm = client();
+    auto health = warm->Get("/health");
+    if (!health || health->status != 200) throw Exception(ErrorCode::kUnavailable, "test server did not answer");
   }
   int port() const { return port_; }
   std::string url() const { return "http://127.0.0.1:" + std::to_string(port_); }
@@ -55,7 +62,7 @@ class TestServer {
   std::unique_ptr<httplib::Client> client(int read_timeout_s = 30) const {
     auto c = std::make_unique<httplib::Client>("127.0.0.1", port_);
     c->set_read_timeout(read_timeout_s, 0);
-    c->set_connection_timeout(5, 0);
+    c->set_connection_timeout(20, 0);
     c->set_keep_alive(true);
     return c;
   }

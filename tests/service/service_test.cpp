@@ -38,7 +38,7 @@ GeomId upload_ready(Service& s, const ControlMesh& mesh = exact_grid(), std::str
 }
 
 // A mesh whose precomputation takes long enough to observe "precomputing" (hundreds of ms).
-ControlMesh slow_mesh() { return test::make_grid(64, 64); }
+ControlMesh slow_mesh() { return test::make_grid(48, 48); }
 
 TEST(ServiceTest, UploadIsIdempotentAndNamespaced) {
   Service s(small_options());

@@ -126,6 +126,17 @@ class ConnectionThreads final : public httplib::TaskQueue {
   bool stopping_ = false;
 };
 
+// cpp-httplib 0.11 listens with a backlog of 5: a burst of clients (hundreds of long polls
+// connecting at once) overflows it and the dropped SYNs cost the clients a second or more.
+// Calling listen() again on the bound socket raises the backlog (Linux updates it in place).
+class Listener final : public httplib::Server {
+ public:
+  void raise_backlog(int backlog) {
+    const auto sock = svr_sock_.load();
+    if (sock != INVALID_SOCKET) ::listen(sock, backlog);
+  }
+};
+
 // ---------------------------------------------------------------------------------------------
 // Helpers
 
@@ -583,7 +594,7 @@ struct HttpServer::Impl {
 
   std::shared_ptr<service::Service> service;
   ServerOptions options;
-  httplib::Server server;
+  Listener server;
   std::vector<std::pair<std::regex, std::string>> routes;  // (pattern, method), for 405
   JsonGate json_gate;
 
@@ -617,6 +628,7 @@ Result<int> HttpServer::start(const std::string& host, int port) {
                  "cannot listen on " + host + ":" + std::to_string(port) + " (address in use or not available)"};
   }
   impl_->port.store(bound);
+  impl_->server.raise_backlog(std::max(impl_->options.max_connections, 128));
   impl_->thread = std::thread([this] { impl_->server.listen_after_bind(); });
   // stop() only works once the accept loop runs.
   const auto deadline = Clock::now() + std::chrono::seconds(10);

@@ -247,6 +247,7 @@ struct Service::Impl {
         e->model = std::move(*model);
         solver = std::make_shared<const engine::Solver>(e->model, cache);
         e->solver = solver;
+        precompute_hist.observe(seconds);  // before the status is visible: stats never lag it
         e->status = GeometryStatus::kReady;
         const size_t actual = mesh_bytes(e->geometry->mesh) + e->model->memory_bytes();
         budget.resize(e->reserved_bytes, actual);
@@ -263,7 +264,6 @@ struct Service::Impl {
     }
     e->cv.notify_all();
     if (solver) {
-      precompute_hist.observe(seconds);
       options.logger.info("geometry " + e->id.hex() + " is ready (precomputed in " + std::to_string(seconds) + " s)");
       for (auto& [request, done] : pending) submit_solve(e, solver, std::move(request), std::move(done));
     } else {
@@ -317,6 +317,10 @@ struct Service::Impl {
         if (fits) {
           stored->res_id = static_cast<uint32_t>(e->results.size() + 1);
           stored->stored_at = std::chrono::system_clock::now();
+          // Counters first, so that whoever sees the result also sees them.
+          total_results.fetch_add(1);
+          solves_ok.fetch_add(1);
+          solve_hist.observe(seconds);
           e->results.push_back(stored);
         }
       }
@@ -329,9 +333,6 @@ struct Service::Impl {
         return;
       }
       e->cv.notify_all();
-      total_results.fetch_add(1);
-      solves_ok.fetch_add(1);
-      solve_hist.observe(seconds);
       done(ResultPtr(std::move(stored)));
     });
   }
