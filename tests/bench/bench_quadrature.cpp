@@ -23,8 +23,8 @@ Case make_case(const std::string& name) {
   c.mesh = test::load_asset_mesh(name);
   const double scale = 1.0 / c.mesh.bounding_diagonal();
   for (Vec3& p : c.mesh.positions()) p *= scale;
-  // Held at three control points of face 0; loaded by pressure and a point force.
-  for (int k = 0; k < 3; ++k) c.request.vertex_constraints.push_back({c.mesh.face(0)[static_cast<size_t>(k)], kAxisAll, Vec3::Zero()});
+  // Held at the control points of face 0; loaded by pressure and a point force.
+  for (int32_t v : c.mesh.face(0)) c.request.vertex_constraints.push_back({v, kAxisAll, Vec3::Zero()});
   c.request.pressure = 1000.0;
   c.request.surface_forces.push_back({{c.mesh.num_faces() / 2, 0, 0.5, 0.5}, Vec3(0.0, 0.0, -10.0)});
   return c;
