@@ -221,6 +221,28 @@ TEST(ServiceTest, LimitCombSumsAndChecks) {
   EXPECT_EQ(s.limit_comb(GeomId{}, {0, 0, 0.5, 0.5}).error().code, ErrorCode::kNotFound);
 }
 
+TEST(ServiceTest, LimitCombIsTheSameBeforeAndAfterThePrecomputation) {
+  ServiceOptions o = small_options();
+  o.precompute_jobs = 1;
+  Service s(o);
+  ASSERT_TRUE(s.upload(slow_mesh(), exact_material()));  // the tagged mesh waits behind this one
+  ControlMesh tagged = test::load_asset_mesh("catmark_cube.obj");
+  tagged.creases().push_back({tagged.face(0)[0], tagged.face(0)[1], 3.0f});
+  tagged.corners().push_back({tagged.face(0)[2], 2.0f});
+  const GeomId id = s.upload(tagged, exact_material()).value().id;
+  const SurfacePoint p{0, 0, 0.1, 0.2};
+  const LimitComb before = s.limit_comb(id, p).value();
+  EXPECT_EQ(s.info(id)->status, GeometryStatus::kPrecomputing);
+  ASSERT_EQ(s.wait_until_precomputed(id, milliseconds(60000))->status, GeometryStatus::kReady);
+  const LimitComb after = s.limit_comb(id, p).value();
+  EXPECT_EQ(before.indices, after.indices);
+  EXPECT_EQ(before.position, after.position);
+  EXPECT_EQ(before.du, after.du);
+  EXPECT_EQ(before.dv, after.dv);
+  // The tags are kept as uploaded.
+  EXPECT_EQ((*s.geometry(id))->mesh, tagged);
+}
+
 TEST(ServiceTest, LagrangeAndLimitConstraintsDisplaceTheLimitPointExactly) {
   Service s(small_options());
   const ControlMesh mesh = exact_grid(4);

@@ -205,7 +205,12 @@ struct Service::Impl {
     }
     std::lock_guard lock(e.evaluator_mu);
     if (!e.evaluator && !e.evaluator_error) {
-      auto created = guarded([&] { return LimitEvaluator::create(e.geometry->mesh, options.precompute.evaluator); });
+      // The same surface the model will have: the engine simulates the smooth limit surface of
+      // the control mesh, without crease and corner tags (ShellModel::build).
+      ControlMesh smooth = e.geometry->mesh;
+      smooth.creases().clear();
+      smooth.corners().clear();
+      auto created = guarded([&] { return LimitEvaluator::create(smooth, options.precompute.evaluator); });
       if (created) e.evaluator = std::move(*created);
       else e.evaluator_error = created.error();
     }
