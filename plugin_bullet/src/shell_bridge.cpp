@@ -1,0 +1,329 @@
+#include "softshell/bullet/shell_bridge.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <thread>
+
+#include <BulletCollision/BroadphaseCollision/btDispatcher.h>
+#include <BulletCollision/CollisionDispatch/btCollisionObject.h>
+#include <BulletCollision/CollisionShapes/btBvhTriangleMeshShape.h>
+#include <BulletCollision/NarrowPhaseCollision/btPersistentManifold.h>
+#include <BulletDynamics/Dynamics/btDiscreteDynamicsWorld.h>
+
+#include "softshell/bullet/force_accumulator.h"
+
+namespace softshell::bullet {
+
+namespace {
+
+Eigen::Isometry3d to_isometry(const btTransform& t) {
+  Eigen::Isometry3d out = Eigen::Isometry3d::Identity();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) out.linear()(r, c) = t.getBasis()[r][c];
+    out.translation()[r] = t.getOrigin()[r];
+  }
+  return out;
+}
+
+void check_settings(const ShellSettings& s) {
+  const auto& c = s.contacts;
+  if (std::isnan(c.contact_threshold)) fail(ErrorCode::kInvalidArgument, "contact threshold is NaN");
+  if (!std::isfinite(c.min_force) || c.min_force < 0.0) {
+    fail(ErrorCode::kInvalidArgument, "minimum contact force must be finite and >= 0 (N)");
+  }
+  if (!std::isfinite(c.force_scale) || c.force_scale <= 0.0) {
+    fail(ErrorCode::kInvalidArgument, "force scale must be finite and > 0");
+  }
+  if (!std::isfinite(s.max_request_rate) || s.max_request_rate < 0.0) {
+    fail(ErrorCode::kInvalidArgument, "max request rate must be finite and >= 0 (requests per second; 0 = unlimited)");
+  }
+  if (!std::isfinite(s.min_relative_change) || s.min_relative_change < 0.0) {
+    fail(ErrorCode::kInvalidArgument, "min relative change must be finite and >= 0");
+  }
+  if (!std::isfinite(s.friction) || s.friction < 0.0) fail(ErrorCode::kInvalidArgument, "friction must be >= 0");
+  if (!std::isfinite(s.restitution) || s.restitution < 0.0 || s.restitution > 1.0) {
+    fail(ErrorCode::kInvalidArgument, "restitution must be in [0, 1]");
+  }
+  const btTransform& t = s.transform;
+  for (int r = 0; r < 3; ++r) {
+    if (!std::isfinite(t.getOrigin()[r]) || !std::isfinite(t.getBasis()[r].x()) ||
+        !std::isfinite(t.getBasis()[r].y()) || !std::isfinite(t.getBasis()[r].z())) {
+      fail(ErrorCode::kInvalidArgument, "shell transform is not finite");
+    }
+  }
+}
+
+}  // namespace
+
+struct ShellBridge::Shell {
+  Shell(std::shared_ptr<Session> session, const GeomId& geometry, const ShellSettings& shell_settings,
+        LimitEvaluator evaluator, std::unique_ptr<CollisionMesh> collision_mesh)
+      : settings(shell_settings),
+        mesh(std::move(collision_mesh)),
+        channel(std::move(session), geometry, shell_settings.max_request_rate),
+        frame(evaluator),
+        submitted(evaluator),
+        positions(evaluator.mesh().positions()) {}
+
+  ShellSettings settings;
+  std::unique_ptr<CollisionMesh> mesh;
+  btCollisionObject object;
+  LatestWinsChannel channel;
+  ForceAccumulator frame;      // this update's contact forces on control points (local frame)
+  ForceAccumulator submitted;  // the forces of the last submitted request
+  bool submitted_any = false;
+  DeformationRequest base;     // supports + floor constraints
+  std::vector<VertexConstraint> floor;
+  std::vector<Vec3> positions;  // control points shown
+  std::vector<ContactForce> contacts;
+  ShellStats stats;
+};
+
+ShellBridge::ShellBridge(btDiscreteDynamicsWorld& world) : world_(world) {}
+
+ShellBridge::~ShellBridge() {
+  for (auto& slot : slots_) {
+    if (slot) world_.removeCollisionObject(&slot->object);
+  }
+}
+
+Result<ShellId> ShellBridge::add_shell(std::shared_ptr<Session> session, const GeomId& geometry,
+                                       const ControlMesh& mesh, const ShellSettings& settings) {
+  return capture([&]() -> ShellId {
+    if (!session) fail(ErrorCode::kInvalidArgument, "add_shell needs a session");
+    check_settings(settings);
+    auto evaluator = LimitEvaluator::create(mesh);
+    if (!evaluator) throw Exception(evaluator.error());
+    auto collision_mesh = CollisionMesh::create(*evaluator, settings.mesh);
+    if (!collision_mesh) throw Exception(collision_mesh.error());
+
+    auto shell = std::make_unique<Shell>(std::move(session), geometry, settings, *evaluator,
+                                         std::move(*collision_mesh));
+    // Supports: the app's constraints and loads, then the floor.
+    shell->base = settings.supports;
+    if (settings.floor.enabled) {
+      auto floor = bullet::floor_constraints(shell->mesh->tessellation(), to_isometry(settings.transform),
+                                             settings.floor);
+      if (!floor) throw Exception(floor.error());
+      shell->floor = std::move(*floor);
+      shell->base.vertex_constraints.insert(shell->base.vertex_constraints.end(), shell->floor.begin(),
+                                            shell->floor.end());
+    }
+
+    // The static collision object.
+    btCollisionObject& object = shell->object;
+    object.setCollisionShape(&shell->mesh->shape());
+    object.setWorldTransform(settings.transform);
+    object.setCollisionFlags(object.getCollisionFlags() | btCollisionObject::CF_STATIC_OBJECT);
+    object.setFriction(static_cast<btScalar>(settings.friction));
+    object.setRestitution(static_cast<btScalar>(settings.restitution));
+
+    // A free slot or a new one; generations start at 1.
+    uint32_t index = 0;
+    while (index < slots_.size() && slots_[index]) ++index;
+    if (index == slots_.size()) {
+      slots_.emplace_back();
+      generations_.push_back(0);
+    }
+    slots_[index] = std::move(shell);
+    const uint32_t generation = ++generations_[index];
+    world_.addCollisionObject(&slots_[index]->object, settings.collision_group, settings.collision_mask);
+    return ShellId{index, generation};
+  });
+}
+
+Result<ShellId> ShellBridge::add_shell(std::shared_ptr<Session> session, const ControlMesh& mesh,
+                                       const Material& material, const ShellSettings& settings,
+                                       std::string_view name_space) {
+  if (!session) return Error{ErrorCode::kInvalidArgument, "add_shell needs a session"};
+  auto uploaded = session->upload(mesh, material, name_space);
+  if (!uploaded) return uploaded.error();
+  return add_shell(std::move(session), uploaded->id, mesh, settings);
+}
+
+bool ShellBridge::valid(ShellId shell) const {
+  return shell.generation != 0 && shell.index < slots_.size() && slots_[shell.index] &&
+         generations_[shell.index] == shell.generation;
+}
+
+ShellBridge::Shell& ShellBridge::get(ShellId shell) const {
+  if (!valid(shell)) {
+    fail(ErrorCode::kNotFound, "shell handle {" + std::to_string(shell.index) + ", " +
+                                   std::to_string(shell.generation) + "} does not name a shell of this bridge");
+  }
+  return *slots_[shell.index];
+}
+
+Result<void> ShellBridge::remove_shell(ShellId shell) {
+  return capture([&] {
+    Shell& s = get(shell);
+    world_.removeCollisionObject(&s.object);
+    slots_[shell.index].reset();
+  });
+}
+
+std::vector<ShellId> ShellBridge::shells() const {
+  std::vector<ShellId> out;
+  for (uint32_t i = 0; i < slots_.size(); ++i) {
+    if (slots_[i]) out.push_back(ShellId{i, generations_[i]});
+  }
+  return out;
+}
+
+void ShellBridge::wake_touching(Shell& shell) {
+  btDispatcher& dispatcher = *world_.getDispatcher();
+  for (int m = 0; m < dispatcher.getNumManifolds(); ++m) {
+    btPersistentManifold* manifold = dispatcher.getManifoldByIndexInternal(m);
+    const btCollisionObject* other = nullptr;
+    if (manifold->getBody0() == &shell.object) other = manifold->getBody1();
+    if (manifold->getBody1() == &shell.object) other = manifold->getBody0();
+    if (other && manifold->getNumContacts() > 0 && !other->isStaticOrKinematicObject()) {
+      const_cast<btCollisionObject*>(other)->activate(true);  // Bullet hands out const bodies here
+    }
+  }
+}
+
+void ShellBridge::apply(Shell& shell, Result<DeformationResult>& outcome, UpdateReport& report) {
+  if (!outcome.ok()) {
+    shell.stats.last_error = outcome.error();
+    ++report.errors;
+    return;
+  }
+  DeformationResult& result = *outcome;
+  if (result.positions.size() != shell.positions.size()) {
+    shell.stats.last_error = Error{ErrorCode::kInternal, "the session returned " +
+                                                             std::to_string(result.positions.size()) +
+                                                             " positions for a mesh of " +
+                                                             std::to_string(shell.positions.size())};
+    ++report.errors;
+    return;
+  }
+  auto applied = capture([&] { shell.mesh->update(result.positions); });
+  if (!applied) {
+    shell.stats.last_error = applied.error();
+    ++report.errors;
+    return;
+  }
+  shell.positions = std::move(result.positions);
+  shell.stats.res_id = result.res_id;
+  shell.stats.last_error.reset();
+  ++shell.stats.results_applied;
+  ++report.results_applied;
+  world_.updateSingleAabb(&shell.object);
+  if (shell.settings.wake_touching_bodies) wake_touching(shell);
+}
+
+UpdateReport ShellBridge::update() {
+  UpdateReport report;
+  const auto now = LatestWinsChannel::Clock::now();
+  const double time_step = static_cast<double>(world_.getSolverInfo().m_timeStep);
+
+  // Start every shell's frame.
+  for (auto& slot : slots_) {
+    if (!slot) continue;
+    slot->contacts.clear();
+    slot->frame.clear();
+    ++slot->stats.updates;
+  }
+
+  // One pass over the manifolds; shells are few, so a linear lookup per manifold is cheapest.
+  btDispatcher& dispatcher = *world_.getDispatcher();
+  ContactForce contact;
+  for (int m = 0; m < dispatcher.getNumManifolds(); ++m) {
+    const btPersistentManifold* manifold = dispatcher.getManifoldByIndexInternal(m);
+    if (manifold->getNumContacts() == 0) continue;
+    for (auto& slot : slots_) {
+      if (!slot) continue;
+      const bool body0 = manifold->getBody0() == &slot->object;
+      if (!body0 && manifold->getBody1() != &slot->object) continue;
+      contact.other = body0 ? manifold->getBody1() : manifold->getBody0();
+      for (int p = 0; p < manifold->getNumContacts(); ++p) {
+        if (contact_force(manifold->getContactPoint(p), body0, slot->object, *slot->mesh, time_step,
+                          slot->settings.contacts, contact)) {
+          slot->frame.add(contact.point, contact.local_force);
+          slot->contacts.push_back(contact);
+        }
+      }
+    }
+  }
+
+  for (auto& slot : slots_) {
+    if (!slot) continue;
+    Shell& shell = *slot;
+    report.contacts += static_cast<int32_t>(shell.contacts.size());
+    shell.stats.contacts = static_cast<int32_t>(shell.contacts.size());
+    shell.stats.contact_force.setZero();
+    for (const ContactForce& c : shell.contacts) shell.stats.contact_force += c.force;
+
+    // Submit this frame unless it repeats the last submitted one (nothing before the first contact).
+    // A frame that gains or loses all contacts always counts as a change.
+    const bool same_emptiness = shell.frame.empty() == shell.submitted.empty();
+    const bool unchanged =
+        shell.submitted_any ? same_emptiness && shell.frame.relative_difference(shell.submitted) <=
+                                                    shell.settings.min_relative_change
+                            : shell.frame.empty();
+    if (unchanged) {
+      ++shell.stats.unchanged_frames;
+    } else {
+      DeformationRequest request = shell.base;
+      shell.frame.append_to(request.forces);
+      shell.channel.submit(std::move(request), now);
+      std::swap(shell.frame, shell.submitted);
+      shell.submitted_any = true;
+      ++report.submitted;
+    }
+
+    // Results that arrived; the pending request goes out when the rate allows.
+    if (auto outcome = shell.channel.poll(now)) apply(shell, *outcome, report);
+    shell.stats.channel = shell.channel.stats();
+  }
+  return report;
+}
+
+Result<void> ShellBridge::wait_idle(std::chrono::milliseconds timeout) {
+  const auto deadline = LatestWinsChannel::Clock::now() + timeout;
+  UpdateReport report;
+  for (;;) {
+    bool idle = true;
+    for (auto& slot : slots_) {
+      if (!slot) continue;
+      Shell& shell = *slot;
+      const auto now = LatestWinsChannel::Clock::now();
+      if (auto outcome = shell.channel.poll(now)) apply(shell, *outcome, report);
+      shell.stats.channel = shell.channel.stats();
+      if (shell.channel.depth() > 0) idle = false;
+    }
+    if (idle) return {};
+    const auto now = LatestWinsChannel::Clock::now();
+    if (now >= deadline) {
+      return Error{ErrorCode::kUnavailable, "ShellBridge::wait_idle: requests still in flight after the timeout"};
+    }
+    // Wait for a request in flight, or sleep until a rate-limited pending one may go.
+    for (auto& slot : slots_) {
+      if (slot && slot->channel.in_flight()) {
+        (void)slot->channel.wait(std::chrono::milliseconds(1));
+      }
+    }
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+}
+
+btCollisionObject& ShellBridge::collision_object(ShellId shell) { return get(shell).object; }
+const CollisionMesh& ShellBridge::collision_mesh(ShellId shell) const { return *get(shell).mesh; }
+const std::vector<Vec3>& ShellBridge::control_positions(ShellId shell) const { return get(shell).positions; }
+const std::vector<ContactForce>& ShellBridge::contacts(ShellId shell) const { return get(shell).contacts; }
+const std::vector<VertexConstraint>& ShellBridge::floor_constraints(ShellId shell) const { return get(shell).floor; }
+const DeformationRequest* ShellBridge::last_sent_request(ShellId shell) const {
+  return get(shell).channel.last_sent();
+}
+const GeomId& ShellBridge::geometry(ShellId shell) const { return get(shell).channel.geometry(); }
+const ShellSettings& ShellBridge::settings(ShellId shell) const { return get(shell).settings; }
+ShellStats ShellBridge::stats(ShellId shell) const {
+  const Shell& s = get(shell);
+  ShellStats out = s.stats;
+  out.channel = s.channel.stats();
+  return out;
+}
+
+}  // namespace softshell::bullet
