@@ -41,6 +41,42 @@ void ForceAccumulator::add(const SurfacePoint& point, const Vec3& force) {
   }
 }
 
+void ForceAccumulator::blend_toward(const ForceAccumulator& target, double alpha, double drop_below) {
+  if (target.num_control_points() != num_control_points()) {
+    fail(ErrorCode::kInvalidArgument, "ForceAccumulator::blend_toward: meshes of different sizes");
+  }
+  // Blend on the union of both touched sets, then keep only the forces that remain.
+  for (int32_t i : target.touched_) {
+    if (!is_touched_[static_cast<size_t>(i)]) {
+      is_touched_[static_cast<size_t>(i)] = 1;
+      touched_.push_back(i);
+    }
+  }
+  total_.setZero();
+  size_t kept = 0;
+  const double drop_squared = drop_below * drop_below;
+  for (int32_t i : touched_) {
+    const auto k = static_cast<size_t>(i);
+    forces_[k] += alpha * (target.forces_[k] - forces_[k]);
+    if (forces_[k].squaredNorm() < drop_squared || forces_[k].isZero(0.0)) {
+      forces_[k].setZero();
+      is_touched_[k] = 0;
+    } else {
+      total_ += forces_[k];
+      touched_[kept++] = i;
+    }
+  }
+  touched_.resize(kept);
+}
+
+void ForceAccumulator::assign(const ForceAccumulator& other) {
+  if (other.num_control_points() != num_control_points()) {
+    fail(ErrorCode::kInvalidArgument, "ForceAccumulator::assign: meshes of different sizes");
+  }
+  clear();
+  for (int32_t i : other.touched_) add(i, other.forces_[static_cast<size_t>(i)]);
+}
+
 void ForceAccumulator::append_to(std::vector<PointForce>& out) const {
   const size_t first = out.size();
   for (int32_t i : touched_) out.push_back(PointForce{i, forces_[static_cast<size_t>(i)]});

@@ -42,11 +42,12 @@ void LatestWinsChannel::submit(DeformationRequest request, Clock::time_point now
   note_depth();
 }
 
-std::optional<Result<DeformationResult>> LatestWinsChannel::poll(Clock::time_point now) {
-  std::optional<Result<DeformationResult>> outcome;
+std::optional<ChannelAnswer> LatestWinsChannel::poll(Clock::time_point now) {
+  std::optional<ChannelAnswer> outcome;
   if (in_flight() && in_flight_.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
-    outcome.emplace(in_flight_.get());  // leaves the future invalid: nothing in flight
-    if (outcome->ok()) {
+    // get() leaves the future invalid: nothing in flight.
+    outcome.emplace(ChannelAnswer{*last_sent_, in_flight_.get()});
+    if (outcome->result.ok()) {
       ++stats_.completed;
     } else {
       ++stats_.failed;

@@ -10,12 +10,17 @@
 #include <BulletCollision/CollisionShapes/btBvhTriangleMeshShape.h>
 #include <BulletCollision/NarrowPhaseCollision/btPersistentManifold.h>
 #include <BulletDynamics/Dynamics/btDiscreteDynamicsWorld.h>
+#include <BulletDynamics/Dynamics/btRigidBody.h>
 
 #include "softshell/bullet/force_accumulator.h"
 
 namespace softshell::bullet {
 
 namespace {
+
+// Smoothing time constant = kStabilityFactor * m * C / dt keeps the per-step loop gain
+// alpha * m * C / dt^2 at about 1 / kStabilityFactor (stable below about 1/3).
+constexpr double kStabilityFactor = 4.0;
 
 Eigen::Isometry3d to_isometry(const btTransform& t) {
   Eigen::Isometry3d out = Eigen::Isometry3d::Identity();
@@ -28,6 +33,9 @@ Eigen::Isometry3d to_isometry(const btTransform& t) {
 
 void check_settings(const ShellSettings& s) {
   const auto& c = s.contacts;
+  if (!std::isfinite(s.response_time) || s.response_time < 0.0) {
+    fail(ErrorCode::kInvalidArgument, "response time must be finite and >= 0 (s)");
+  }
   if (std::isnan(c.contact_threshold)) fail(ErrorCode::kInvalidArgument, "contact threshold is NaN");
   if (!std::isfinite(c.min_force) || c.min_force < 0.0) {
     fail(ErrorCode::kInvalidArgument, "minimum contact force must be finite and >= 0 (N)");
@@ -63,7 +71,9 @@ struct ShellBridge::Shell {
         mesh(std::move(collision_mesh)),
         channel(std::move(session), geometry, shell_settings.max_request_rate),
         frame(evaluator),
+        smoothed(evaluator),
         submitted(evaluator),
+        rest(evaluator.mesh().positions()),
         positions(evaluator.mesh().positions()) {}
 
   ShellSettings settings;
@@ -71,8 +81,12 @@ struct ShellBridge::Shell {
   btCollisionObject object;
   LatestWinsChannel channel;
   ForceAccumulator frame;      // this update's contact forces on control points (local frame)
+  ForceAccumulator smoothed;   // the forces to send: `frame` smoothed over time
   ForceAccumulator submitted;  // the forces of the last submitted request
   bool submitted_any = false;
+  double mass = 0.0;             // heaviest dynamic body of the last frame with contacts (kg)
+  double max_point_force = 0.0;  // largest control-point force of the last frame with contacts (N)
+  std::vector<Vec3> rest;       // rest control points
   DeformationRequest base;     // supports + floor constraints
   std::vector<VertexConstraint> floor;
   std::vector<Vec3> positions;  // control points shown
@@ -171,26 +185,32 @@ std::vector<ShellId> ShellBridge::shells() const {
   return out;
 }
 
-void ShellBridge::wake_touching(Shell& shell) {
+void ShellBridge::refresh_contacts(Shell& shell) {
+  // Bullet keeps contact points in the shell's local frame and refreshes them from the objects'
+  // transforms only; a static shell never moves, so after a deformation its cached points would
+  // still hold bodies on the old surface. Dropping them lets the next step's narrowphase find the
+  // contacts on the new surface.
   btDispatcher& dispatcher = *world_.getDispatcher();
   for (int m = 0; m < dispatcher.getNumManifolds(); ++m) {
     btPersistentManifold* manifold = dispatcher.getManifoldByIndexInternal(m);
     const btCollisionObject* other = nullptr;
     if (manifold->getBody0() == &shell.object) other = manifold->getBody1();
     if (manifold->getBody1() == &shell.object) other = manifold->getBody0();
-    if (other && manifold->getNumContacts() > 0 && !other->isStaticOrKinematicObject()) {
+    if (!other || manifold->getNumContacts() == 0) continue;
+    dispatcher.clearManifold(manifold);
+    if (shell.settings.wake_touching_bodies && !other->isStaticOrKinematicObject()) {
       const_cast<btCollisionObject*>(other)->activate(true);  // Bullet hands out const bodies here
     }
   }
 }
 
-void ShellBridge::apply(Shell& shell, Result<DeformationResult>& outcome, UpdateReport& report) {
-  if (!outcome.ok()) {
-    shell.stats.last_error = outcome.error();
+void ShellBridge::apply(Shell& shell, ChannelAnswer& answer, UpdateReport& report) {
+  if (!answer.result.ok()) {
+    shell.stats.last_error = answer.result.error();
     ++report.errors;
     return;
   }
-  DeformationResult& result = *outcome;
+  DeformationResult& result = *answer.result;
   if (result.positions.size() != shell.positions.size()) {
     shell.stats.last_error = Error{ErrorCode::kInternal, "the session returned " +
                                                              std::to_string(result.positions.size()) +
@@ -205,13 +225,27 @@ void ShellBridge::apply(Shell& shell, Result<DeformationResult>& outcome, Update
     ++report.errors;
     return;
   }
+
+  // Compliance at the load: f.u / |sum f|^2 over the request's control-point forces (the virtual
+  // work of the contact forces at their points, since f_A = sum_i N_A(p_i) f_i).
+  Vec3 total = Vec3::Zero();
+  double work = 0.0;
+  for (const PointForce& f : answer.request.forces) {
+    if (f.index < 0 || static_cast<size_t>(f.index) >= shell.rest.size()) continue;
+    total += f.force;
+    work += f.force.dot(result.positions[static_cast<size_t>(f.index)] - shell.rest[static_cast<size_t>(f.index)]);
+  }
+  if (total.squaredNorm() > 0.0 && std::isfinite(work)) {
+    shell.stats.compliance = std::max(0.0, work) / total.squaredNorm();
+  }
+
   shell.positions = std::move(result.positions);
   shell.stats.res_id = result.res_id;
   shell.stats.last_error.reset();
   ++shell.stats.results_applied;
   ++report.results_applied;
   world_.updateSingleAabb(&shell.object);
-  if (shell.settings.wake_touching_bodies) wake_touching(shell);
+  refresh_contacts(shell);
 }
 
 UpdateReport ShellBridge::update() {
@@ -220,6 +254,7 @@ UpdateReport ShellBridge::update() {
   const double time_step = static_cast<double>(world_.getSolverInfo().m_timeStep);
 
   // Start every shell's frame.
+  std::vector<double> max_mass(slots_.size(), 0.0);  // heaviest dynamic body touching each shell (kg)
   for (auto& slot : slots_) {
     if (!slot) continue;
     slot->contacts.clear();
@@ -233,11 +268,15 @@ UpdateReport ShellBridge::update() {
   for (int m = 0; m < dispatcher.getNumManifolds(); ++m) {
     const btPersistentManifold* manifold = dispatcher.getManifoldByIndexInternal(m);
     if (manifold->getNumContacts() == 0) continue;
-    for (auto& slot : slots_) {
+    for (size_t k = 0; k < slots_.size(); ++k) {
+      auto& slot = slots_[k];
       if (!slot) continue;
       const bool body0 = manifold->getBody0() == &slot->object;
       if (!body0 && manifold->getBody1() != &slot->object) continue;
       contact.other = body0 ? manifold->getBody1() : manifold->getBody0();
+      if (const btRigidBody* body = btRigidBody::upcast(contact.other); body && body->getInvMass() > 0) {
+        max_mass[k] = std::max(max_mass[k], 1.0 / static_cast<double>(body->getInvMass()));
+      }
       for (int p = 0; p < manifold->getNumContacts(); ++p) {
         if (contact_force(manifold->getContactPoint(p), body0, slot->object, *slot->mesh, time_step,
                           slot->settings.contacts, contact)) {
@@ -248,34 +287,54 @@ UpdateReport ShellBridge::update() {
     }
   }
 
-  for (auto& slot : slots_) {
-    if (!slot) continue;
-    Shell& shell = *slot;
+  for (size_t k = 0; k < slots_.size(); ++k) {
+    if (!slots_[k]) continue;
+    Shell& shell = *slots_[k];
     report.contacts += static_cast<int32_t>(shell.contacts.size());
     shell.stats.contacts = static_cast<int32_t>(shell.contacts.size());
     shell.stats.contact_force.setZero();
     for (const ContactForce& c : shell.contacts) shell.stats.contact_force += c.force;
 
-    // Submit this frame unless it repeats the last submitted one (nothing before the first contact).
-    // A frame that gains or loses all contacts always counts as a change.
-    const bool same_emptiness = shell.frame.empty() == shell.submitted.empty();
+    // Smooth the frame's forces (time constant: the app's, or longer where stability needs it).
+    // The heaviest body of the last frame with contacts: a body that bounces off for a step
+    // still sets the pace while it comes back.
+    if (!shell.contacts.empty()) shell.mass = max_mass[k];
+    double tau = shell.settings.response_time;
+    if (shell.settings.stabilize && time_step > 0.0) {
+      tau = std::max(tau, kStabilityFactor * shell.mass * shell.stats.compliance / time_step);
+    }
+    shell.stats.time_constant = tau;
+    const double alpha = (tau > 0.0 && time_step > 0.0) ? -std::expm1(-time_step / tau) : 1.0;
+    if (!shell.frame.empty()) {
+      shell.max_point_force = 0.0;
+      for (int32_t i : shell.frame.touched()) {
+        shell.max_point_force = std::max(shell.max_point_force, shell.frame.forces()[static_cast<size_t>(i)].norm());
+      }
+    }
+    // Forces fading out after the last contact are dropped below 1e-3 of the last frame's largest.
+    shell.smoothed.blend_toward(shell.frame, alpha,
+                                std::max(shell.settings.contacts.min_force, 1e-3 * shell.max_point_force));
+
+    // Submit unless it repeats the last submitted forces (nothing before the first contact). Gaining
+    // or losing all forces always counts as a change.
+    const bool same_emptiness = shell.smoothed.empty() == shell.submitted.empty();
     const bool unchanged =
-        shell.submitted_any ? same_emptiness && shell.frame.relative_difference(shell.submitted) <=
+        shell.submitted_any ? same_emptiness && shell.smoothed.relative_difference(shell.submitted) <=
                                                     shell.settings.min_relative_change
-                            : shell.frame.empty();
+                            : shell.smoothed.empty();
     if (unchanged) {
       ++shell.stats.unchanged_frames;
     } else {
       DeformationRequest request = shell.base;
-      shell.frame.append_to(request.forces);
+      shell.smoothed.append_to(request.forces);
       shell.channel.submit(std::move(request), now);
-      std::swap(shell.frame, shell.submitted);
+      shell.submitted.assign(shell.smoothed);
       shell.submitted_any = true;
       ++report.submitted;
     }
 
     // Results that arrived; the pending request goes out when the rate allows.
-    if (auto outcome = shell.channel.poll(now)) apply(shell, *outcome, report);
+    if (auto answer = shell.channel.poll(now)) apply(shell, *answer, report);
     shell.stats.channel = shell.channel.stats();
   }
   return report;
@@ -290,7 +349,7 @@ Result<void> ShellBridge::wait_idle(std::chrono::milliseconds timeout) {
       if (!slot) continue;
       Shell& shell = *slot;
       const auto now = LatestWinsChannel::Clock::now();
-      if (auto outcome = shell.channel.poll(now)) apply(shell, *outcome, report);
+      if (auto answer = shell.channel.poll(now)) apply(shell, *answer, report);
       shell.stats.channel = shell.channel.stats();
       if (shell.channel.depth() > 0) idle = false;
     }

@@ -36,6 +36,15 @@ class ForceAccumulator {
   /// Adds a force directly on control point `index` (no spreading).
   void add(int32_t index, const Vec3& force);
 
+  /// Moves every force a fraction `alpha` (0..1) toward `target`'s: f += alpha (target - f) on
+  /// the control points either touches (exponential smoothing; alpha = 1 copies `target`).
+  /// Forces that end up smaller than `drop_below` (N) are removed. Both must belong to meshes
+  /// with the same number of control points.
+  void blend_toward(const ForceAccumulator& target, double alpha, double drop_below = 0.0);
+
+  /// Becomes a copy of `other`'s forces (same number of control points), reusing storage.
+  void assign(const ForceAccumulator& other);
+
   /// Dense forces per control point (#control points, N).
   const std::vector<Vec3>& forces() const { return forces_; }
   /// Control points with a force since the last `clear`, in first-touched order.

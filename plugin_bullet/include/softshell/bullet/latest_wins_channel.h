@@ -25,6 +25,12 @@ struct ChannelStats {
   uint32_t max_depth = 0;  ///< most requests held at once (in flight + pending); never above 2
 };
 
+/// A finished request: what was sent and what the session answered (a result or an error).
+struct ChannelAnswer {
+  DeformationRequest request;
+  Result<DeformationResult> result;
+};
+
 /// At most one request in flight and at most one pending; `submit` never blocks and never grows a
 /// queue: a request submitted while another is in flight (or while the rate limit holds) becomes
 /// the pending one, replacing any older pending request.
@@ -50,10 +56,10 @@ class LatestWinsChannel {
   /// pending request (replacing an older pending one). Never blocks on the session.
   void submit(DeformationRequest request, Clock::time_point now = Clock::now());
 
-  /// Non-blocking: if the request in flight is done, returns its outcome (a result or the
+  /// Non-blocking: if the request in flight is done, returns it with its outcome (a result or the
   /// session's error); then sends the pending request if the rate allows. std::nullopt if no
   /// outcome is ready.
-  std::optional<Result<DeformationResult>> poll(Clock::time_point now = Clock::now());
+  std::optional<ChannelAnswer> poll(Clock::time_point now = Clock::now());
 
   /// Blocks up to `timeout` for the request in flight to finish (then `poll` returns it). True if
   /// nothing is in flight or it finished.
@@ -67,6 +73,8 @@ class LatestWinsChannel {
   Clock::time_point next_send_time() const;
   /// The request sent most recently (the one in flight, if any), or nullptr.
   const DeformationRequest* last_sent() const { return last_sent_ ? &*last_sent_ : nullptr; }
+  /// The pending request, or nullptr.
+  const DeformationRequest* pending() const { return pending_ ? &*pending_ : nullptr; }
   const ChannelStats& stats() const { return stats_; }
   const GeomId& geometry() const { return geometry_; }
   Session& session() const { return *session_; }

@@ -39,6 +39,16 @@ struct ShellSettings {
   /// replace the waiting request (latest wins), so a slower rate never delays the newest forces
   /// by more than one interval.
   double max_request_rate = 60.0;
+  /// Time constant (s of simulated time, >= 0) with which the forces sent follow the contact
+  /// forces: exponential smoothing per Bullet step. 0 sends every frame's own contact forces.
+  double response_time = 0.1;
+  /// Lengthen the time constant where the coupling needs it to stay stable. The shell is quasi-
+  /// static and its shape lags the forces, so a body resting on it feeds back on itself: when the
+  /// surface sinks by ds in one step the body's contact impulse changes by m ds / dt. With the
+  /// shell's compliance C at the load (m/N, measured from each result: f.u / |sum f|^2) and the
+  /// heaviest dynamic body m on it, smoothing with alpha <= dt^2 / (4 m C) per step keeps the loop
+  /// gain below 1/4 (time constant about 4 m C / dt). At rest the smoothed force equals the raw one.
+  bool stabilize = true;
   /// A frame whose control-point forces differ from the last submitted ones by less than this
   /// (relative L2 norm, >= 0) is not submitted. 0 submits every frame whose forces changed at all.
   double min_relative_change = 0.01;
@@ -72,6 +82,8 @@ struct ShellStats {
   uint64_t updates = 0;             ///< `ShellBridge::update` calls seen
   int32_t contacts = 0;             ///< contact points in the last update
   Vec3 contact_force = Vec3::Zero();  ///< total contact force of the last update (world frame, N)
+  double compliance = 0.0;          ///< measured compliance at the load, f.u / |sum f|^2 (length unit / N; 0 = unknown)
+  double time_constant = 0.0;       ///< smoothing time constant used in the last update (s)
   uint64_t unchanged_frames = 0;    ///< frames not submitted because their forces barely changed
   uint64_t results_applied = 0;     ///< results the collision mesh was updated to
   uint32_t res_id = 0;              ///< the result the collision mesh shows (0 = rest shape)
@@ -164,8 +176,8 @@ class ShellBridge {
  private:
   struct Shell;
   Shell& get(ShellId shell) const;
-  void apply(Shell& shell, Result<DeformationResult>& outcome, UpdateReport& report);
-  void wake_touching(Shell& shell);
+  void apply(Shell& shell, ChannelAnswer& answer, UpdateReport& report);
+  void refresh_contacts(Shell& shell);
 
   btDiscreteDynamicsWorld& world_;
   std::vector<std::unique_ptr<Shell>> slots_;
