@@ -311,9 +311,11 @@ UpdateReport ShellBridge::update() {
         shell.max_point_force = std::max(shell.max_point_force, shell.frame.forces()[static_cast<size_t>(i)].norm());
       }
     }
-    // Forces fading out after the last contact are dropped below 1e-3 of the last frame's largest.
-    shell.smoothed.blend_toward(shell.frame, alpha,
-                                std::max(shell.settings.contacts.min_force, 1e-3 * shell.max_point_force));
+    // Smoothed forces that fade out (where contacts left) are dropped once below a small fraction
+    // of the largest force of the last frame with contacts: 1e-6 while contacts go on, 1e-3 after
+    // the last one, so the shell comes back to rest in a few time constants.
+    const double fade = shell.frame.empty() ? 1e-3 : 1e-6;
+    shell.smoothed.blend_toward(shell.frame, alpha, fade * shell.max_point_force);
 
     // Submit unless it repeats the last submitted forces (nothing before the first contact). Gaining
     // or losing all forces always counts as a change.
