@@ -4,6 +4,8 @@
 #include <cmath>
 #include <string>
 #include <thread>
+#include <mutex>
+#include <condition_variable>
 
 #include <BulletCollision/BroadphaseCollision/btDispatcher.h>
 #include <BulletCollision/CollisionDispatch/btCollisionObject.h>
@@ -73,8 +75,7 @@ struct ShellBridge::Shell {
         frame(evaluator),
         smoothed(evaluator),
         submitted(evaluator),
-        rest(evaluator.mesh().positions()),
-        positions(evaluator.mesh().positions()) {}
+        rest(evaluator.mesh().positions()) {}
 
   ShellSettings settings;
   std::unique_ptr<CollisionMesh> mesh;
@@ -86,17 +87,30 @@ struct ShellBridge::Shell {
   bool submitted_any = false;
   double mass = 0.0;             // heaviest dynamic body of the last frame with contacts (kg)
   double max_point_force = 0.0;  // largest control-point force of the last frame with contacts (N)
-  std::vector<Vec3> rest;       // rest control points
-  DeformationRequest base;     // supports + floor constraints
+  std::vector<Vec3> rest;        // rest control points
+  DeformationRequest base;       // supports + floor constraints
   std::vector<VertexConstraint> floor;
-  std::vector<Vec3> positions;  // control points shown
   std::vector<ContactForce> contacts;
   ShellStats stats;
+
+  // Background mesh update, guarded by ShellBridge::mutex_: a result waiting for the worker
+  // (latest wins), the worker preparing the hidden shape, a prepared shape waiting for commit.
+  std::optional<DeformationResult> queued;
+  bool preparing = false;
+  bool ready = false;
+  uint32_t ready_res_id = 0;
+  std::optional<Error> prepare_error;
 };
 
 ShellBridge::ShellBridge(btDiscreteDynamicsWorld& world) : world_(world) {}
 
 ShellBridge::~ShellBridge() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+  }
+  wake_.notify_all();
+  if (worker_.joinable()) worker_.join();
   for (auto& slot : slots_) {
     if (slot) world_.removeCollisionObject(&slot->object);
   }
@@ -134,6 +148,7 @@ Result<ShellId> ShellBridge::add_shell(std::shared_ptr<Session> session, const G
     object.setRestitution(static_cast<btScalar>(settings.restitution));
 
     // A free slot or a new one; generations start at 1.
+    std::lock_guard lock(mutex_);
     uint32_t index = 0;
     while (index < slots_.size() && slots_[index]) ++index;
     if (index == slots_.size()) {
@@ -172,8 +187,14 @@ ShellBridge::Shell& ShellBridge::get(ShellId shell) const {
 Result<void> ShellBridge::remove_shell(ShellId shell) {
   return capture([&] {
     Shell& s = get(shell);
-    world_.removeCollisionObject(&s.object);
-    slots_[shell.index].reset();
+    std::unique_ptr<Shell> removed;
+    {
+      // Wait for the worker to leave this shell's mesh alone, then take it out of the slots.
+      std::unique_lock lock(mutex_);
+      done_.wait(lock, [&] { return !s.preparing; });
+      removed = std::move(slots_[shell.index]);
+    }
+    world_.removeCollisionObject(&removed->object);
   });
 }
 
@@ -185,7 +206,48 @@ std::vector<ShellId> ShellBridge::shells() const {
   return out;
 }
 
-void ShellBridge::refresh_contacts(Shell& shell) {
+void ShellBridge::work() {
+  std::unique_lock lock(mutex_);
+  for (;;) {
+    // The next shell with a result waiting (the mutex guards the slots and the job states).
+    Shell* job = nullptr;
+    wake_.wait(lock, [&] {
+      if (stopping_) return true;
+      for (auto& slot : slots_) {
+        // A prepared shape is committed before the next one is prepared over it.
+        if (slot && slot->queued && !slot->preparing && !slot->ready) {
+          job = slot.get();
+          return true;
+        }
+      }
+      return false;
+    });
+    if (stopping_) return;
+    DeformationResult result = std::move(*job->queued);
+    job->queued.reset();
+    job->preparing = true;
+    lock.unlock();
+
+    // The heavy part, while Bullet keeps using the visible shape.
+    auto prepared = capture([&] { job->mesh->prepare(std::move(result.positions)); });
+
+    lock.lock();
+    job->preparing = false;
+    job->ready = prepared.ok();
+    job->ready_res_id = result.res_id;
+    if (!prepared.ok()) job->prepare_error = prepared.error();
+    done_.notify_all();
+  }
+}
+
+void ShellBridge::show(Shell& shell, uint32_t res_id, UpdateReport& report) {
+  // The collision object now uses the other shape of the double buffer.
+  shell.object.setCollisionShape(&shell.mesh->shape());
+  shell.stats.res_id = res_id;
+  ++shell.stats.results_applied;
+  ++report.results_applied;
+  world_.updateSingleAabb(&shell.object);
+
   // Bullet keeps contact points in the shell's local frame and refreshes them from the objects'
   // transforms only; a static shell never moves, so after a deformation its cached points would
   // still hold bodies on the old surface. Dropping them lets the next step's narrowphase find the
@@ -204,24 +266,18 @@ void ShellBridge::refresh_contacts(Shell& shell) {
   }
 }
 
-void ShellBridge::apply(Shell& shell, ChannelAnswer& answer, UpdateReport& report) {
+void ShellBridge::receive(Shell& shell, ChannelAnswer& answer, UpdateReport& report) {
   if (!answer.result.ok()) {
     shell.stats.last_error = answer.result.error();
     ++report.errors;
     return;
   }
   DeformationResult& result = *answer.result;
-  if (result.positions.size() != shell.positions.size()) {
+  if (result.positions.size() != shell.rest.size()) {
     shell.stats.last_error = Error{ErrorCode::kInternal, "the session returned " +
                                                              std::to_string(result.positions.size()) +
                                                              " positions for a mesh of " +
-                                                             std::to_string(shell.positions.size())};
-    ++report.errors;
-    return;
-  }
-  auto applied = capture([&] { shell.mesh->update(result.positions); });
-  if (!applied) {
-    shell.stats.last_error = applied.error();
+                                                             std::to_string(shell.rest.size())};
     ++report.errors;
     return;
   }
@@ -229,23 +285,59 @@ void ShellBridge::apply(Shell& shell, ChannelAnswer& answer, UpdateReport& repor
   // Compliance at the load: f.u / |sum f|^2 over the request's control-point forces (the virtual
   // work of the contact forces at their points, since f_A = sum_i N_A(p_i) f_i).
   Vec3 total = Vec3::Zero();
-  double work = 0.0;
+  double virtual_work = 0.0;
   for (const PointForce& f : answer.request.forces) {
     if (f.index < 0 || static_cast<size_t>(f.index) >= shell.rest.size()) continue;
     total += f.force;
-    work += f.force.dot(result.positions[static_cast<size_t>(f.index)] - shell.rest[static_cast<size_t>(f.index)]);
+    virtual_work += f.force.dot(result.positions[static_cast<size_t>(f.index)] - shell.rest[static_cast<size_t>(f.index)]);
   }
-  if (total.squaredNorm() > 0.0 && std::isfinite(work)) {
-    shell.stats.compliance = std::max(0.0, work) / total.squaredNorm();
+  if (total.squaredNorm() > 0.0 && std::isfinite(virtual_work)) {
+    shell.stats.compliance = std::max(0.0, virtual_work) / total.squaredNorm();
   }
-
-  shell.positions = std::move(result.positions);
-  shell.stats.res_id = result.res_id;
   shell.stats.last_error.reset();
-  ++shell.stats.results_applied;
-  ++report.results_applied;
-  world_.updateSingleAabb(&shell.object);
-  refresh_contacts(shell);
+
+  if (shell.settings.background_mesh_update) {
+    // Hand the positions to the worker (replacing a result it has not started on).
+    {
+      std::lock_guard lock(mutex_);
+      shell.queued = std::move(result);
+      if (!worker_.joinable()) worker_ = std::thread([this] { work(); });
+    }
+    wake_.notify_all();
+    return;
+  }
+  auto applied = capture([&] { shell.mesh->update(std::move(result.positions)); });
+  if (!applied) {
+    shell.stats.last_error = applied.error();
+    ++report.errors;
+    return;
+  }
+  show(shell, result.res_id, report);
+}
+
+void ShellBridge::commit_prepared(Shell& shell, UpdateReport& report) {
+  std::optional<uint32_t> res_id;
+  {
+    std::lock_guard lock(mutex_);
+    if (shell.prepare_error) {
+      shell.stats.last_error = std::move(shell.prepare_error);
+      shell.prepare_error.reset();
+      ++report.errors;
+    }
+    if (shell.ready && !shell.preparing && shell.mesh->commit()) {
+      shell.ready = false;
+      res_id = shell.ready_res_id;
+    }
+  }
+  if (res_id) {
+    wake_.notify_all();  // the worker may go on with a result queued meanwhile
+    show(shell, *res_id, report);
+  }
+}
+
+bool ShellBridge::busy(const Shell& shell) const {
+  std::lock_guard lock(mutex_);
+  return shell.queued.has_value() || shell.preparing || shell.ready;
 }
 
 UpdateReport ShellBridge::update() {
@@ -253,8 +345,8 @@ UpdateReport ShellBridge::update() {
   const auto now = LatestWinsChannel::Clock::now();
   const double time_step = static_cast<double>(world_.getSolverInfo().m_timeStep);
 
-  // Start every shell's frame.
-  std::vector<double> max_mass(slots_.size(), 0.0);  // heaviest dynamic body touching each shell (kg)
+  // Start every shell's frame; shapes prepared in the background since the last step go live.
+  max_mass_.assign(slots_.size(), 0.0);  // heaviest dynamic body touching each shell (kg)
   for (auto& slot : slots_) {
     if (!slot) continue;
     slot->contacts.clear();
@@ -275,7 +367,7 @@ UpdateReport ShellBridge::update() {
       if (!body0 && manifold->getBody1() != &slot->object) continue;
       contact.other = body0 ? manifold->getBody1() : manifold->getBody0();
       if (const btRigidBody* body = btRigidBody::upcast(contact.other); body && body->getInvMass() > 0) {
-        max_mass[k] = std::max(max_mass[k], 1.0 / static_cast<double>(body->getInvMass()));
+        max_mass_[k] = std::max(max_mass_[k], 1.0 / static_cast<double>(body->getInvMass()));
       }
       for (int p = 0; p < manifold->getNumContacts(); ++p) {
         if (contact_force(manifold->getContactPoint(p), body0, slot->object, *slot->mesh, time_step,
@@ -296,9 +388,9 @@ UpdateReport ShellBridge::update() {
     for (const ContactForce& c : shell.contacts) shell.stats.contact_force += c.force;
 
     // Smooth the frame's forces (time constant: the app's, or longer where stability needs it).
-    // The heaviest body of the last frame with contacts: a body that bounces off for a step
-    // still sets the pace while it comes back.
-    if (!shell.contacts.empty()) shell.mass = max_mass[k];
+    // The heaviest body of the last frame with contacts sets the pace: a body that bounces off
+    // for a step still does while it comes back.
+    if (!shell.contacts.empty()) shell.mass = max_mass_[k];
     double tau = shell.settings.response_time;
     if (shell.settings.stabilize && time_step > 0.0) {
       tau = std::max(tau, kStabilityFactor * shell.mass * shell.stats.compliance / time_step);
@@ -335,8 +427,10 @@ UpdateReport ShellBridge::update() {
       ++report.submitted;
     }
 
-    // Results that arrived; the pending request goes out when the rate allows.
-    if (auto answer = shell.channel.poll(now)) apply(shell, *answer, report);
+    // Results that arrived; the pending request goes out when the rate allows. Shapes the worker
+    // has prepared go live.
+    if (auto answer = shell.channel.poll(now)) receive(shell, *answer, report);
+    if (shell.settings.background_mesh_update) commit_prepared(shell, report);
     shell.stats.channel = shell.channel.stats();
   }
   return report;
@@ -351,28 +445,37 @@ Result<void> ShellBridge::wait_idle(std::chrono::milliseconds timeout) {
       if (!slot) continue;
       Shell& shell = *slot;
       const auto now = LatestWinsChannel::Clock::now();
-      if (auto answer = shell.channel.poll(now)) apply(shell, *answer, report);
+      if (auto answer = shell.channel.poll(now)) receive(shell, *answer, report);
+      commit_prepared(shell, report);
       shell.stats.channel = shell.channel.stats();
-      if (shell.channel.depth() > 0) idle = false;
+      if (shell.channel.depth() > 0 || busy(shell)) idle = false;
     }
     if (idle) return {};
-    const auto now = LatestWinsChannel::Clock::now();
-    if (now >= deadline) {
+    if (LatestWinsChannel::Clock::now() >= deadline) {
       return Error{ErrorCode::kUnavailable, "ShellBridge::wait_idle: requests still in flight after the timeout"};
     }
-    // Wait for a request in flight, or sleep until a rate-limited pending one may go.
+    // Wait a little for a request in flight or the worker; a rate-limited pending request waits
+    // for its time.
+    bool waited = false;
     for (auto& slot : slots_) {
       if (slot && slot->channel.in_flight()) {
         (void)slot->channel.wait(std::chrono::milliseconds(1));
+        waited = true;
+        break;
       }
     }
-    std::this_thread::sleep_for(std::chrono::microseconds(200));
+    if (!waited) {
+      std::unique_lock lock(mutex_);
+      done_.wait_for(lock, std::chrono::microseconds(500));
+    }
   }
 }
 
 btCollisionObject& ShellBridge::collision_object(ShellId shell) { return get(shell).object; }
 const CollisionMesh& ShellBridge::collision_mesh(ShellId shell) const { return *get(shell).mesh; }
-const std::vector<Vec3>& ShellBridge::control_positions(ShellId shell) const { return get(shell).positions; }
+const std::vector<Vec3>& ShellBridge::control_positions(ShellId shell) const {
+  return get(shell).mesh->control_positions();
+}
 const std::vector<ContactForce>& ShellBridge::contacts(ShellId shell) const { return get(shell).contacts; }
 const std::vector<VertexConstraint>& ShellBridge::floor_constraints(ShellId shell) const { return get(shell).floor; }
 const DeformationRequest* ShellBridge::last_sent_request(ShellId shell) const {

@@ -28,8 +28,9 @@ struct RayWorld {
   btDbvtBroadphase broadphase;
   btCollisionWorld world{&dispatcher, &broadphase, &configuration};
   btCollisionObject object;
-  explicit RayWorld(btCollisionShape& shape) {
-    object.setCollisionShape(&shape);
+  CollisionMesh& mesh;
+  explicit RayWorld(CollisionMesh& m) : mesh(m) {
+    object.setCollisionShape(&mesh.shape());
     world.addCollisionObject(&object);
   }
   ~RayWorld() { world.removeCollisionObject(&object); }
@@ -43,6 +44,7 @@ struct RayWorld {
     }
   };
   std::optional<std::pair<Vec3, int32_t>> cast(const Vec3& from, const Vec3& to) {
+    object.setCollisionShape(&mesh.shape());  // the visible half of the double buffer
     world.updateSingleAabb(&object);
     const btVector3 a(float(from.x()), float(from.y()), float(from.z())), b(float(to.x()), float(to.y()), float(to.z()));
     Callback hit(a, b);
@@ -141,7 +143,7 @@ TEST(CollisionMesh, SurfacePointOfAContactLiesOnTheLimitSurface) {
 TEST(CollisionMesh, UpdateMovesTheShapeRaysSeeAndResetRestores) {
   const ControlMesh mesh = test::make_grid(6, 6);
   auto cm = make(mesh, 2);
-  RayWorld rays(cm->shape());
+  RayWorld rays(*cm);
   const Vec3 from(0.41, 0.52, 1.0), to(0.41, 0.52, -1.0);
   auto hit = rays.cast(from, to);
   ASSERT_TRUE(hit);

@@ -15,14 +15,17 @@ size_t ScriptedSession::outstanding() const {
 void ScriptedSession::answer(std::vector<Vec3> positions) {
   std::lock_guard lock(mutex_);
   if (promises_.empty()) throw std::logic_error("ScriptedSession::answer: nothing outstanding");
-  promises_.front().set_value(DeformationResult{next_id_++, std::move(positions)});
+  DeformationResult result;
+  result.res_id = next_id_++;
+  result.positions = std::move(positions);
+  promises_.front().set_value(Result<DeformationResult>(std::move(result)));
   promises_.pop_front();
 }
 
 void ScriptedSession::fail_next(Error error) {
   std::lock_guard lock(mutex_);
   if (promises_.empty()) throw std::logic_error("ScriptedSession::fail_next: nothing outstanding");
-  promises_.front().set_value(std::move(error));
+  promises_.front().set_value(Result<DeformationResult>(std::move(error)));
   promises_.pop_front();
 }
 

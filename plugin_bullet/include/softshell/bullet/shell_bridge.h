@@ -5,6 +5,9 @@
 /// `Session`), and the shell's collision mesh follows the deformation the server computes.
 
 #include <chrono>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -68,6 +71,11 @@ struct ShellSettings {
   int collision_mask = ~2;    ///< everything but other static objects
   /// Wake sleeping bodies that touch the shell when its shape changes, so they follow the dent.
   bool wake_touching_bodies = true;
+  /// Move the collision mesh to a new result on the bridge's worker thread (limit evaluation and
+  /// BVH refit into the hidden half of the double-buffered `CollisionMesh`), so the physics thread
+  /// only swaps shapes: a result then shows one or more steps after it arrived. False does the
+  /// whole update inside `update()`.
+  bool background_mesh_update = true;
 };
 
 /// A shell's handle: an index and a generation, so a handle of a removed shell is detected.
@@ -115,9 +123,14 @@ struct UpdateReport {
 /// keep pressing on it, so it stays dented while they lie there and springs back when they leave
 /// (one request without contact forces).
 ///
-/// Ownership: the world is not owned and must outlive the bridge (the destructor removes the
-/// shells' collision objects from it). Sessions are shared. Thread-safety: none; call every
-/// member from the thread that steps the world, between `stepSimulation` calls.
+/// With `background_mesh_update` (the default) the new limit surface is evaluated and the BVH
+/// refitted on one worker thread owned by the bridge, into the hidden half of the shell's
+/// double-buffered collision mesh; `update()` then only swaps the collision object's shape.
+///
+/// Ownership: the world is not owned and must outlive the bridge (the destructor stops the worker
+/// and removes the shells' collision objects from it). Sessions are shared. Thread-safety: call
+/// every member from the thread that steps the world, between `stepSimulation` calls (the worker
+/// never touches what Bullet or that thread use).
 class ShellBridge {
  public:
   explicit ShellBridge(btDiscreteDynamicsWorld& world);
@@ -176,12 +189,21 @@ class ShellBridge {
  private:
   struct Shell;
   Shell& get(ShellId shell) const;
-  void apply(Shell& shell, ChannelAnswer& answer, UpdateReport& report);
-  void refresh_contacts(Shell& shell);
+  void receive(Shell& shell, ChannelAnswer& answer, UpdateReport& report);
+  void commit_prepared(Shell& shell, UpdateReport& report);
+  void show(Shell& shell, uint32_t res_id, UpdateReport& report);
+  bool busy(const Shell& shell) const;
+  void work();
 
   btDiscreteDynamicsWorld& world_;
   std::vector<std::unique_ptr<Shell>> slots_;
   std::vector<uint32_t> generations_;
+  std::vector<double> max_mass_;  // scratch of update()
+  // The worker that prepares collision meshes; mutex_ guards slots_ changes and the job states.
+  mutable std::mutex mutex_;
+  std::condition_variable wake_, done_;
+  bool stopping_ = false;
+  std::thread worker_;
 };
 
 }  // namespace softshell::bullet
