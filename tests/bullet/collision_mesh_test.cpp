@@ -1,6 +1,8 @@
 #include "softshell/bullet/collision_mesh.h"
 
+#include <atomic>
 #include <random>
+#include <thread>
 
 #include <BulletCollision/CollisionShapes/btBvhTriangleMeshShape.h>
 #include <btBulletCollisionCommon.h>
@@ -178,6 +180,62 @@ TEST(CollisionMesh, UpdateMovesTheShapeRaysSeeAndResetRestores) {
   hit = rays.cast(from, to);
   ASSERT_TRUE(hit);
   EXPECT_NEAR(hit->first.z(), 0.0, 1e-6);
+}
+
+TEST(CollisionMesh, PrepareOnAThreadWhileBulletUsesTheVisibleShape) {
+  const ControlMesh mesh = test::make_grid(8, 8);
+  auto cm = make(mesh, 3);
+  RayWorld rays(*cm);
+  const Vec3 from(0.3, 0.6, 1.0), to(0.3, 0.6, -1.0);
+  EXPECT_FALSE(cm->commit());  // nothing prepared
+  const btBvhTriangleMeshShape* before = &cm->shape();
+  const uint64_t version = cm->version();
+
+  // Raise the plate by 0.25 on another thread while rays keep hitting the visible (rest) shape.
+  std::vector<Vec3> raised = mesh.positions();
+  for (Vec3& p : raised) p.z() += 0.25;
+  std::atomic<bool> done{false};
+  std::thread worker([&] {
+    cm->prepare(raised);
+    done = true;
+  });
+  int casts = 0;
+  while (!done || casts < 10) {
+    btCollisionWorld::ClosestRayResultCallback hit(btVector3(0.3f, 0.6f, 1.0f), btVector3(0.3f, 0.6f, -1.0f));
+    rays.world.rayTest(hit.m_rayFromWorld, hit.m_rayToWorld, hit);
+    ASSERT_TRUE(hit.hasHit());
+    EXPECT_NEAR(hit.m_hitPointWorld.z(), 0.0, 1e-6);
+    ++casts;
+  }
+  worker.join();
+  EXPECT_TRUE(cm->prepared());
+  EXPECT_EQ(&cm->shape(), before);
+  EXPECT_EQ(cm->version(), version);
+  EXPECT_EQ(cm->control_positions(), mesh.positions());
+
+  ASSERT_TRUE(cm->commit());
+  EXPECT_FALSE(cm->prepared());
+  EXPECT_NE(&cm->shape(), before);
+  EXPECT_EQ(cm->version(), version + 1);
+  EXPECT_EQ(cm->control_positions(), raised);
+  auto hit = rays.cast(from, to);
+  ASSERT_TRUE(hit);
+  EXPECT_NEAR(hit->first.z(), 0.25, 1e-6);
+  // Rendering data and the tessellation follow the committed shape.
+  EXPECT_NEAR(cm->positions()[2], 0.25f, 1e-6f);
+  EXPECT_NEAR(cm->tessellation().vertices()[0].z(), 0.25, 1e-12);
+  EXPECT_NEAR(cm->normals()[2], 1.0f, 1e-6f);
+  Vec3 lo, hi;
+  cm->bounds(lo, hi);
+  EXPECT_NEAR(lo.z(), 0.25, 1e-12);
+
+  // A failed prepare leaves nothing prepared and the visible shape alone.
+  EXPECT_THROW(cm->prepare(std::vector<Vec3>(3, Vec3::Zero())), Exception);
+  std::vector<Vec3> bad = raised;
+  bad[5].x() = std::nan("");
+  EXPECT_THROW(cm->prepare(bad), Exception);
+  EXPECT_FALSE(cm->commit());
+  EXPECT_EQ(cm->control_positions(), raised);
 }
 
 }  // namespace
