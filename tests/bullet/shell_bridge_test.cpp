@@ -8,6 +8,9 @@
 #include <gtest/gtest.h>
 
 #include "bullet_world.h"
+#if SOFTSHELL_TEST_HAVE_EMBEDDED
+#include "softshell/embedded_session.h"
+#endif
 #include "test_meshes.h"
 #include "test_sessions.h"
 
@@ -16,7 +19,13 @@ namespace {
 
 using namespace std::chrono_literals;
 
+#if SOFTSHELL_TEST_HAVE_EMBEDDED
+// The real in-process server.
+std::shared_ptr<Session> make_session() { return std::make_shared<EmbeddedSession>(); }
+#else
+// Interim until EmbeddedSession is on main: the same engine, without the service around it.
 std::shared_ptr<Session> make_session() { return std::make_shared<test::EngineSession>(); }
+#endif
 
 constexpr double kGravity = 9.81;
 constexpr double kStep = 1.0 / 120.0;
