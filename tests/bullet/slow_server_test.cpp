@@ -11,13 +11,15 @@
 #include <thread>
 
 #include <gtest/gtest.h>
-#include <httplib.h>
 
 #include "bullet_world.h"
 #include "softshell/bullet/shell_bridge.h"
 #include "softshell/embedded_session.h"
 #include "softshell/remote_session.h"
 #include "test_meshes.h"
+
+// Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
+#include <httplib.h>
 
 namespace softshell::bullet {
 namespace {
@@ -40,7 +42,7 @@ class SlowProxy {
     server_.Post(".*", [this](const httplib::Request& req, httplib::Response& res) { forward(req, res); });
     port_ = server_.bind_to_any_port("127.0.0.1");
     thread_ = std::thread([this] { server_.listen_after_bind(); });
-    server_.wait_until_ready();
+    while (!server_.is_running()) std::this_thread::sleep_for(std::chrono::milliseconds(1));  // httplib 0.11: no wait_until_ready
   }
   ~SlowProxy() {
     server_.stop();
