@@ -260,7 +260,9 @@ void ShellBridge::show(Shell& shell, uint32_t res_id, UpdateReport& report) {
     if (manifold->getBody1() == &shell.object) other = manifold->getBody0();
     if (!other || manifold->getNumContacts() == 0) continue;
     dispatcher.clearManifold(manifold);
-    if (shell.settings.wake_touching_bodies && !other->isStaticOrKinematicObject()) {
+    // A sleeping body gets no new contacts against a static object: wake it so that it follows
+    // the new surface (and keeps pressing on it). Awake bodies keep their sleep timers.
+    if (!other->isStaticOrKinematicObject() && other->getActivationState() == ISLAND_SLEEPING) {
       const_cast<btCollisionObject*>(other)->activate(true);  // Bullet hands out const bodies here
     }
   }

@@ -224,6 +224,38 @@ TEST(ShellBridge, TwiceTheMassGivesTwiceTheDeflection) {
   EXPECT_NEAR(two.contact_deflection / one.contact_deflection, 2.0, 0.1);
 }
 
+TEST(ShellBridge, SleepingBodiesKeepPressingAndTheShellSpringsBackWhenTheyLeave) {
+  Plate plate;
+  test::BulletWorld scene(-kGravity * plate.up());
+  ShellBridge bridge(scene.world);
+  const ShellId shell = bridge.add_shell(make_session(), plate.mesh, plate.material, plate.settings()).value();
+  btRigidBody* sphere = scene.add_sphere(0.05, 1.0, btVector3(0.0f, 0.0f, 0.08f));
+  sphere->setDamping(0.3f, 0.8f);
+
+  // Long enough for Bullet to put the resting sphere to sleep (2 s without motion).
+  bool slept = false;
+  lockstep(scene, bridge, 600, [&] { slept = slept || !sphere->isActive(); });
+  EXPECT_TRUE(slept);
+  const size_t centre = size_t(test::grid_index(Plate::kN, Plate::kN / 2, Plate::kN / 2));
+  const double dent = plate.mesh.positions()[centre].z() - bridge.control_positions(shell)[centre].z();
+  EXPECT_GT(dent, 1e-3);
+  const DeformationRequest* sent = bridge.last_sent_request(shell);
+  ASSERT_NE(sent, nullptr);
+  EXPECT_NEAR(total_force(*sent).z(), -kGravity, 0.05 * kGravity);
+
+  // The sphere is taken away: the forces fade out and the plate comes back to its rest shape.
+  scene.world.removeRigidBody(sphere);
+  lockstep(scene, bridge, 240);
+  sent = bridge.last_sent_request(shell);
+  ASSERT_NE(sent, nullptr);
+  EXPECT_TRUE(sent->forces.empty());
+  EXPECT_EQ(bridge.stats(shell).contacts, 0);
+  for (size_t i = 0; i < plate.mesh.positions().size(); ++i) {
+    EXPECT_LT((bridge.control_positions(shell)[i] - plate.mesh.positions()[i]).norm(), 1e-9);
+  }
+  scene.world.addRigidBody(sphere);  // BulletWorld removes it again
+}
+
 // An arch lying on the floor (z = 0): z = 0.3 sin(pi x) over [0, 1] x [0, 0.6], its straight
 // edges on the floor, no other support; a box rests on its crown.
 struct ArchScene {

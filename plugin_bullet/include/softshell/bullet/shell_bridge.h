@@ -69,8 +69,6 @@ struct ShellSettings {
   /// Bullet broadphase filter group and mask of the shell's collision object.
   int collision_group = 2;    ///< btBroadphaseProxy::StaticFilter
   int collision_mask = ~2;    ///< everything but other static objects
-  /// Wake sleeping bodies that touch the shell when its shape changes, so they follow the dent.
-  bool wake_touching_bodies = true;
   /// Move the collision mesh to a new result on the bridge's worker thread (limit evaluation and
   /// BVH refit into the hidden half of the double-buffered `CollisionMesh`), so the physics thread
   /// only swaps shapes: a result then shows one or more steps after it arrived. False does the
