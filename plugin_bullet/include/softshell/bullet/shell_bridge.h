@@ -6,12 +6,12 @@
 
 #include <chrono>
 #include <condition_variable>
-#include <mutex>
-#include <thread>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string_view>
+#include <thread>
 #include <vector>
 
 #include <LinearMath/btTransform.h>
@@ -112,14 +112,17 @@ struct UpdateReport {
 /// `stepSimulation`: it reads the contact manifolds of every shell, turns each contact point's
 /// impulse into a force (impulse / Bullet's internal time step, normal plus friction) at the
 /// contact's `(face, u, v)`, spreads the frame's forces over the control points with the limit
-/// weights and submits one request per shell (supports + this frame's contact forces) to a
-/// `LatestWinsChannel`, which sends it without blocking. Results that arrived are applied: the
-/// collision mesh moves to the deformed limit surface in place and its BVH is refitted.
+/// weights, smooths them over `response_time` (see `stabilize`) and submits one request per
+/// shell (supports + these forces) to a `LatestWinsChannel`, which sends it without blocking.
+/// Results that arrived are applied: the collision mesh moves to the deformed limit surface and
+/// its BVH is refitted; cached contacts of the shell are dropped so that the next step finds the
+/// new surface.
 ///
 /// The shell model is linear and every result is a displacement from the rest shape, so each
-/// request carries the current frame's forces, not an accumulation. Bodies resting on a shell
-/// keep pressing on it, so it stays dented while they lie there and springs back when they leave
-/// (one request without contact forces).
+/// request carries the current forces, not an accumulation. Bodies resting on a shell keep
+/// pressing on it, so it stays dented while they lie there and springs back when they leave (the
+/// forces fade out, then one request without contact forces). Only dynamic bodies push: Bullet
+/// makes no contacts between a static shell and kinematic or static objects.
 ///
 /// With `background_mesh_update` (the default) the new limit surface is evaluated and the BVH
 /// refitted on one worker thread owned by the bridge, into the hidden half of the shell's
