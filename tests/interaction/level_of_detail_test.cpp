@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include "scripted_session.h"
 #include "test_meshes.h"
 
 namespace softshell {
@@ -324,62 +325,7 @@ TEST(LevelOfDetail, CreasesAndBoundaryModeAreCarried) {
 // ------------------------------------------------------------------------------------------------
 // ParallelLevels against a test double of Session whose results the test releases one by one.
 
-class ScriptedSession : public Session {
- public:
-  Result<UploadResult> upload(const ControlMesh& mesh, const Material&, std::string_view) override {
-    UploadResult r;
-    r.id.bytes[0] = static_cast<uint8_t>(++uploads_);
-    r.created = true;
-    vertices_[r.id.bytes[0]] = mesh.num_vertices();
-    return r;
-  }
-  Result<std::vector<GeometryInfo>> geometries() override { return unsupported(); }
-  Result<Geometry> geometry(const GeomId&) override { return unsupported(); }
-  Result<DeformationResult> deform(const GeomId&, const DeformationRequest&) override { return unsupported(); }
-  std::future<Result<DeformationResult>> deform_async(const GeomId& id, const DeformationRequest& request) override {
-    std::lock_guard lock(mutex_);
-    calls_.push_back({id.bytes[0], request, std::promise<Result<DeformationResult>>()});
-    return calls_.back().promise.get_future();
-  }
-  Result<std::vector<uint32_t>> result_ids(const GeomId&) override { return unsupported(); }
-  Result<DeformationResult> result(const GeomId&, uint32_t) override { return unsupported(); }
-  Result<std::optional<DeformationResult>> latest_result(const GeomId&, uint32_t, std::chrono::milliseconds) override {
-    return unsupported();
-  }
-  Result<LimitComb> limit_comb(const GeomId&, const SurfacePoint&) override { return unsupported(); }
-
-  // Completes call k with a result of the right size (or an error).
-  void finish(size_t k, bool ok = true) {
-    std::lock_guard lock(mutex_);
-    Call& c = calls_.at(k);
-    if (ok) {
-      c.promise.set_value(DeformationResult{static_cast<uint32_t>(k + 1),
-                                            std::vector<Vec3>(static_cast<size_t>(vertices_[c.geometry]))});
-    } else {
-      c.promise.set_value(Error{ErrorCode::kUnprocessable, "undetermined"});
-    }
-  }
-  size_t calls() {
-    std::lock_guard lock(mutex_);
-    return calls_.size();
-  }
-  const DeformationRequest& request(size_t k) {
-    std::lock_guard lock(mutex_);
-    return calls_.at(k).request;
-  }
-
- private:
-  static Error unsupported() { return Error{ErrorCode::kInternal, "not scripted"}; }
-  struct Call {
-    uint8_t geometry;
-    DeformationRequest request;
-    std::promise<Result<DeformationResult>> promise;
-  };
-  std::mutex mutex_;
-  std::deque<Call> calls_;
-  std::map<uint8_t, int32_t> vertices_;
-  int uploads_ = 0;
-};
+using test::ScriptedSession;
 
 TEST(ParallelLevels, CoarseFirstFineWhenReadyNeverStale) {
   ScriptedSession session;
