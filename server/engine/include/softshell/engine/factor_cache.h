@@ -20,6 +20,8 @@ struct FactorCacheStats {
 };
 
 /// Thread-safe LRU cache of factorizations, keyed by (model, set of eliminated DOFs).
+///
+/// Several solvers asking for the same missing factor at once share one factorization.
 class FactorCache {
  public:
   /// `budget_bytes`: factors are evicted (least recently used first) to stay under it. A factor
@@ -30,8 +32,8 @@ class FactorCache {
   FactorCache& operator=(const FactorCache&) = delete;
 
   FactorCacheStats stats() const;
-  /// Drops every factor of a model (when its geometry is removed).
-  void forget_model(const void* model);
+  /// Drops every factor of a model (`ShellModel::id()`), e.g. when its geometry is removed.
+  void forget_model(uint64_t model_id);
   void clear();
 
   struct Impl;

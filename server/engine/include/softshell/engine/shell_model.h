@@ -8,6 +8,7 @@
 #include <functional>
 #include <memory>
 
+#include <Eigen/Core>
 #include <Eigen/SparseCore>
 
 #include "softshell/control_mesh.h"
@@ -57,6 +58,8 @@ class ShellModel {
   static Result<std::shared_ptr<const ShellModel>> build(const ControlMesh& mesh, const Material& material,
                                                          const PrecomputeOptions& options = {});
 
+  /// A process-unique id (factor cache key).
+  uint64_t id() const { return id_; }
   const ControlMesh& mesh() const { return evaluator_.mesh(); }
   const Material& material() const { return material_; }
   const LimitEvaluator& evaluator() const { return evaluator_; }
@@ -69,6 +72,14 @@ class ShellModel {
 
   /// The quadrature points of every face (for loads and stresses).
   const std::vector<QuadraturePoint>& quadrature() const { return quadrature_; }
+
+  /// Rigid-body modes (3n x 6c for c connected components): per component, unit translations
+  /// along x, y, z and infinitesimal rotations about x, y, z through the component's centroid
+  /// (scaled by 1 / its size). K times any of them is zero up to round-off.
+  const Eigen::MatrixXd& rigid_modes() const { return rigid_modes_; }
+  /// Connected component of each control point (0..c-1) and the number of components.
+  const std::vector<int32_t>& component_of() const { return component_of_; }
+  int32_t num_components() const { return static_cast<int32_t>(rigid_modes_.cols() / 6); }
 
   /// Total area of the limit surface (sum over quadrature points).
   double area() const { return area_; }
@@ -90,11 +101,16 @@ class ShellModel {
   ShellModel(LimitEvaluator evaluator, Material material, PrecomputeOptions options);
   friend class ShellModelBuilder;
 
+  uint64_t id_;
   LimitEvaluator evaluator_;
   Material material_;
   PrecomputeOptions options_;
   Eigen::SparseMatrix<double> stiffness_;
   std::vector<QuadraturePoint> quadrature_;
+  Eigen::MatrixXd rigid_modes_;
+  std::vector<int32_t> component_of_;
+  Eigen::VectorXd area_weights_;    // n: integral of N_A dA (consistent surface loads)
+  Eigen::VectorXd normal_weights_;  // 3n: integral of N_A n dA (pressure)
   double area_ = 0.0;
   double build_seconds_ = 0.0;
 };

@@ -61,6 +61,8 @@ class Solver {
   const ShellModel& model() const { return *model_; }
 
  private:
+  Solution solve_on_cached_factor(const DeformationRequest& request) const;  // throws Exception
+
   std::shared_ptr<const ShellModel> model_;
   std::shared_ptr<FactorCache> cache_;
 };

@@ -1,0 +1,130 @@
+#include "factorization.h"
+
+#include <chrono>
+#include <cstring>
+#include <string>
+
+#include <cholmod.h>
+
+namespace softshell::engine::internal {
+namespace {
+
+// CHOLMOD keeps its workspace and settings in a cholmod_common; one per thread lets many solves
+// run at once on a shared (read-only) factor.
+struct ThreadCommon {
+  cholmod_common common;
+  ThreadCommon() {
+    cholmod_start(&common);
+    common.print = 0;        // errors are reported through our own messages
+    common.error_handler = nullptr;
+    common.supernodal = CHOLMOD_AUTO;
+    common.final_ll = 1;     // keep L L^T: the solve is two triangular sweeps
+  }
+  ~ThreadCommon() { cholmod_finish(&common); }
+  ThreadCommon(const ThreadCommon&) = delete;
+  ThreadCommon& operator=(const ThreadCommon&) = delete;
+};
+
+cholmod_common* thread_common() {
+  thread_local ThreadCommon common;
+  return &common.common;
+}
+
+}  // namespace
+
+Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned)
+    : fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
+  const auto start = std::chrono::steady_clock::now();
+  const Eigen::SparseMatrix<double>& k = model.stiffness();
+  const auto n = static_cast<size_t>(k.rows());
+  position_.assign(n, -1);
+  std::vector<char> excluded(n, 0);
+  for (int32_t d : fixed_) excluded[static_cast<size_t>(d)] = 1;
+  for (int32_t d : pinned_) excluded[static_cast<size_t>(d)] = 1;
+  for (size_t d = 0; d < n; ++d) {
+    if (!excluded[d]) {
+      position_[d] = static_cast<int32_t>(factored_.size());
+      factored_.push_back(static_cast<int32_t>(d));
+    }
+  }
+  if (factored_.empty()) return;  // everything fixed: nothing to factor
+
+  // Upper triangle of K_aa in CSC (CHOLMOD stype = 1).
+  size_t nnz = 0;
+  for (int32_t col : factored_) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(k, col); it; ++it) {
+      if (it.row() <= col && position_[static_cast<size_t>(it.row())] >= 0) ++nnz;
+    }
+  }
+  cholmod_common* c = thread_common();
+  const size_t na = factored_.size();
+  cholmod_sparse* a = cholmod_allocate_sparse(na, na, nnz, 1, 1, 1, CHOLMOD_REAL, c);
+  if (!a) fail(ErrorCode::kResourceExhausted, "not enough memory for the stiffness matrix of this constraint set");
+  auto* ap = static_cast<int*>(a->p);
+  auto* ai = static_cast<int*>(a->i);
+  auto* ax = static_cast<double*>(a->x);
+  size_t pos = 0;
+  for (size_t j = 0; j < na; ++j) {
+    ap[j] = static_cast<int>(pos);
+    const int32_t col = factored_[j];
+    for (Eigen::SparseMatrix<double>::InnerIterator it(k, col); it; ++it) {
+      const int32_t row = position_[static_cast<size_t>(it.row())];
+      if (it.row() <= col && row >= 0) {
+        ai[pos] = row;
+        ax[pos] = it.value();
+        ++pos;
+      }
+    }
+  }
+  ap[na] = static_cast<int>(pos);
+
+  cholmod_factor* l = cholmod_analyze(a, c);
+  const bool ok = l && cholmod_factorize(a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
+  const size_t minor = l ? l->minor : 0;
+  cholmod_free_sparse(&a, c);
+  if (!ok) {
+    if (l) cholmod_free_factor(&l, c);
+    if (c->status == CHOLMOD_OUT_OF_MEMORY) fail(ErrorCode::kResourceExhausted, "not enough memory to factorize K");
+    const int32_t dof = minor < na ? factored_[minor] : -1;
+    throw FactorizationFailed(ErrorCode::kUnprocessable,
+         "the stiffness matrix with the prescribed DOFs removed is not positive definite" +
+             (dof >= 0 ? " (first failing pivot: control point " + std::to_string(dof / 3) + ", axis " +
+                             std::string(1, "xyz"[dof % 3]) + ")"
+                       : std::string()) +
+             ": part of the shell can move without strain; add constraints there");
+  }
+  factor_ = reinterpret_cast<cholmod_factor_struct*>(l);
+  const size_t int_size = sizeof(int);
+  bytes_ = l->is_super ? l->xsize * sizeof(double) + l->ssize * int_size + (3 * l->nsuper + 3) * int_size
+                       : l->nzmax * (sizeof(double) + int_size);
+  bytes_ += 4 * l->n * int_size + n * sizeof(int32_t) + factored_.size() * sizeof(int32_t);
+  factor_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+Factorization::~Factorization() {
+  if (factor_) {
+    auto* l = reinterpret_cast<cholmod_factor*>(factor_);
+    cholmod_free_factor(&l, thread_common());
+  }
+}
+
+Eigen::MatrixXd Factorization::solve(const Eigen::MatrixXd& rhs) const {
+  if (!factor_ || rhs.cols() == 0) return Eigen::MatrixXd::Zero(rhs.rows(), rhs.cols());
+  cholmod_common* c = thread_common();
+  cholmod_dense b;
+  std::memset(&b, 0, sizeof b);
+  b.nrow = static_cast<size_t>(rhs.rows());
+  b.ncol = static_cast<size_t>(rhs.cols());
+  b.nzmax = b.nrow * b.ncol;
+  b.d = b.nrow;
+  b.x = const_cast<double*>(rhs.data());  // read only
+  b.xtype = CHOLMOD_REAL;
+  b.dtype = CHOLMOD_DOUBLE;
+  cholmod_dense* x = cholmod_solve(CHOLMOD_A, reinterpret_cast<cholmod_factor*>(factor_), &b, c);
+  if (!x) fail(ErrorCode::kResourceExhausted, "not enough memory for the triangular solves");
+  Eigen::MatrixXd out = Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(x->x), rhs.rows(), rhs.cols());
+  cholmod_free_dense(&x, c);
+  return out;
+}
+
+}  // namespace softshell::engine::internal

@@ -1,0 +1,57 @@
+#pragma once
+// A CHOLMOD Cholesky factor of K with a set of DOFs taken out (private to the engine).
+//
+// DOFs are split three ways: `fixed` (prescribed, eliminated), `pinned` (kept out of the factor
+// so that what remains is positive definite even when the fixed DOFs leave rigid-body motions
+// free; they are solved for in the small dense system together with the Lagrange multipliers),
+// and `factored` (everything else, in the factor).
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include "softshell/engine/shell_model.h"
+#include "softshell/result.h"
+
+struct cholmod_factor_struct;
+
+namespace softshell::engine::internal {
+
+/// Thrown when K with the chosen DOFs removed is not positive definite (a mechanism the rigid-
+/// mode analysis did not catch); the solver then takes the robust path.
+class FactorizationFailed : public Exception {
+ public:
+  using Exception::Exception;
+};
+
+class Factorization {
+ public:
+  /// Factorizes K restricted to the DOFs neither fixed nor pinned. Throws
+  /// Exception(kUnprocessable) if that matrix is not positive definite.
+  Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned);
+  ~Factorization();
+  Factorization(const Factorization&) = delete;
+  Factorization& operator=(const Factorization&) = delete;
+
+  const std::vector<int32_t>& fixed() const { return fixed_; }
+  const std::vector<int32_t>& pinned() const { return pinned_; }
+  const std::vector<int32_t>& factored() const { return factored_; }
+  /// Index of a DOF among the factored ones, or -1.
+  int32_t position(int32_t dof) const { return position_[static_cast<size_t>(dof)]; }
+  size_t bytes() const { return bytes_; }
+  double factor_ms() const { return factor_ms_; }
+
+  /// X = K_aa^-1 B for a block of right-hand sides (rows: factored DOFs). Thread-safe.
+  Eigen::MatrixXd solve(const Eigen::MatrixXd& rhs) const;
+
+ private:
+  std::vector<int32_t> fixed_, pinned_, factored_, position_;
+  cholmod_factor_struct* factor_ = nullptr;
+  size_t bytes_ = 0;
+  double factor_ms_ = 0.0;
+};
+
+}  // namespace softshell::engine::internal

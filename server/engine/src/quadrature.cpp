@@ -1,0 +1,129 @@
+#include "quadrature.h"
+
+#include <cmath>
+#include <map>
+
+namespace softshell::engine::internal {
+
+void gauss_legendre_01(int n, std::vector<double>& points, std::vector<double>& weights) {
+  // Newton iteration on the Legendre polynomial roots (Golub-Welsch would do too); exact to
+  // round-off for the small n used here.
+  points.assign(static_cast<size_t>(n), 0.0);
+  weights.assign(static_cast<size_t>(n), 0.0);
+  constexpr double kPi = 3.14159265358979323846;
+  for (int i = 0; i < n; ++i) {
+    double x = std::cos(kPi * (i + 0.75) / (n + 0.5));
+    double dp = 0.0;
+    for (int iter = 0; iter < 100; ++iter) {
+      double p0 = 1.0, p1 = x;
+      for (int k = 2; k <= n; ++k) {
+        const double p2 = ((2.0 * k - 1.0) * x * p1 - (k - 1.0) * p0) / k;
+        p0 = p1;
+        p1 = p2;
+      }
+      if (n == 1) p1 = x, p0 = 1.0;
+      dp = n * (x * p1 - p0) / (x * x - 1.0);
+      const double dx = p1 / dp;
+      x -= dx;
+      if (std::abs(dx) < 1e-16) break;
+    }
+    // Map [-1, 1] -> [0, 1]; ascending order.
+    points[static_cast<size_t>(n - 1 - i)] = 0.5 * (x + 1.0);
+    weights[static_cast<size_t>(n - 1 - i)] = 1.0 / ((1.0 - x * x) * dp * dp);  // = w / 2
+  }
+}
+
+IrregularCorners::IrregularCorners(const ControlMesh& mesh) : mesh_(mesh) {
+  // Valence (faces around a vertex) and boundary status from the edges.
+  const auto n = static_cast<size_t>(mesh.num_vertices());
+  std::vector<int32_t> faces_around(n, 0);
+  std::map<std::pair<int32_t, int32_t>, int> edge_faces;
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    auto fv = mesh.face(f);
+    for (size_t i = 0; i < fv.size(); ++i) {
+      ++faces_around[static_cast<size_t>(fv[i])];
+      const int32_t a = fv[i], b = fv[(i + 1) % fv.size()];
+      ++edge_faces[{std::min(a, b), std::max(a, b)}];
+    }
+  }
+  std::vector<char> on_boundary(n, 0);
+  for (const auto& [edge, count] : edge_faces) {
+    if (count == 1) on_boundary[static_cast<size_t>(edge.first)] = on_boundary[static_cast<size_t>(edge.second)] = 1;
+  }
+  irregular_vertex_.assign(n, 0);
+  for (size_t v = 0; v < n; ++v) {
+    // Regular: interior with 4 faces, boundary with 2 faces (smooth boundary) or 1 face (corner).
+    const bool regular = on_boundary[v] ? (faces_around[v] == 2 || faces_around[v] == 1) : faces_around[v] == 4;
+    irregular_vertex_[v] = regular ? 0 : 1;
+  }
+  // Sharp features change the patch structure around them too.
+  for (const Crease& c : mesh.creases()) {
+    if (c.sharpness > 0.0f) irregular_vertex_[static_cast<size_t>(c.v0)] = irregular_vertex_[static_cast<size_t>(c.v1)] = 1;
+  }
+  for (const Corner& c : mesh.corners()) {
+    if (c.sharpness > 0.0f) irregular_vertex_[static_cast<size_t>(c.vertex)] = 1;
+  }
+}
+
+uint8_t IrregularCorners::corners(int32_t face, int32_t subface) const {
+  auto fv = mesh_.face(face);
+  if (fv.size() == 4) {
+    uint8_t mask = 0;
+    for (int c = 0; c < 4; ++c) {
+      if (irregular_vertex_[static_cast<size_t>(fv[static_cast<size_t>(c)])]) mask |= static_cast<uint8_t>(1u << c);
+    }
+    return mask;
+  }
+  // Sub-face k of an n-gon: corner (0,0) is control point k, (1,1) the face centre, which is an
+  // extraordinary vertex of valence n after the first refinement.
+  uint8_t mask = 1u << 2;
+  if (irregular_vertex_[static_cast<size_t>(fv[static_cast<size_t>(subface)])]) mask |= 1u;
+  return mask;
+}
+
+namespace {
+
+void add_cell(double u0, double v0, double size, const std::vector<double>& gp, const std::vector<double>& gw,
+              std::vector<std::array<double, 2>>& out_uv, std::vector<double>& out_weight) {
+  for (size_t j = 0; j < gp.size(); ++j) {
+    for (size_t i = 0; i < gp.size(); ++i) {
+      out_uv.push_back({u0 + size * gp[i], v0 + size * gp[j]});
+      out_weight.push_back(size * size * gw[i] * gw[j]);
+    }
+  }
+}
+
+// Splits a cell while it touches an irregular corner of the unit square and levels remain.
+void refine(double u0, double v0, double size, int levels, uint8_t mask, const std::vector<double>& gp,
+            const std::vector<double>& gw, std::vector<std::array<double, 2>>& out_uv,
+            std::vector<double>& out_weight) {
+  const std::array<std::array<double, 2>, 4> corner = {{{0, 0}, {1, 0}, {1, 1}, {0, 1}}};
+  bool touches = false;
+  for (int c = 0; c < 4; ++c) {
+    if (!(mask & (1u << c))) continue;
+    const double cu = corner[static_cast<size_t>(c)][0], cv = corner[static_cast<size_t>(c)][1];
+    touches |= (cu == u0 || cu == u0 + size) && (cv == v0 || cv == v0 + size);
+  }
+  if (!touches || levels == 0) {
+    add_cell(u0, v0, size, gp, gw, out_uv, out_weight);
+    return;
+  }
+  const double h = 0.5 * size;
+  refine(u0, v0, h, levels - 1, mask, gp, gw, out_uv, out_weight);
+  refine(u0 + h, v0, h, levels - 1, mask, gp, gw, out_uv, out_weight);
+  refine(u0 + h, v0 + h, h, levels - 1, mask, gp, gw, out_uv, out_weight);
+  refine(u0, v0 + h, h, levels - 1, mask, gp, gw, out_uv, out_weight);
+}
+
+}  // namespace
+
+void face_rule(int gauss_points, int levels, uint8_t corner_mask, std::vector<std::array<double, 2>>& out_uv,
+               std::vector<double>& out_weight) {
+  std::vector<double> gp, gw;
+  gauss_legendre_01(gauss_points, gp, gw);
+  out_uv.clear();
+  out_weight.clear();
+  refine(0.0, 0.0, 1.0, corner_mask ? levels : 0, corner_mask, gp, gw, out_uv, out_weight);
+}
+
+}  // namespace softshell::engine::internal

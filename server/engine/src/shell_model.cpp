@@ -1,0 +1,306 @@
+#include "softshell/engine/shell_model.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <string>
+
+#include "kirchhoff_love.h"
+#include "parallel.h"
+#include "quadrature.h"
+#include "request_check.h"
+
+namespace softshell::engine {
+
+using internal::Matrix3Xd;
+
+namespace {
+
+// The element stiffness of one (sub-)face and its load integrals, in the face's local indices.
+struct Element {
+  std::vector<int32_t> indices;              // control points (unique)
+  Eigen::MatrixXd stiffness;                 // 3m x 3m
+  Eigen::VectorXd area_weights;              // m: integral of N_A dA
+  Eigen::Matrix3Xd normal_weights;           // 3 x m: integral of N_A n dA
+  std::vector<QuadraturePoint> points;       // its quadrature points (parameter weights)
+  double area = 0.0;
+};
+
+struct FaceWork {
+  int32_t face;
+  int32_t subface;
+  uint8_t corner_mask;
+};
+
+void integrate_element(const LimitEvaluator& evaluator, const Material& material, const QuadratureOptions& quad,
+                       const FaceWork& work, Element& out) {
+  std::vector<std::array<double, 2>> uvs;
+  std::vector<double> weights;
+  internal::face_rule(quad.gauss_points, quad.ev_refinement_levels, work.corner_mask, uvs, weights);
+
+  Eigen::MatrixXd basis;
+  evaluator.face_stencils(work.face, work.subface, uvs, out.indices, basis);
+  const auto m = static_cast<Eigen::Index>(out.indices.size());
+  Eigen::MatrixX3d x(m, 3);
+  for (Eigen::Index a = 0; a < m; ++a) {
+    x.row(a) = evaluator.mesh().positions()[static_cast<size_t>(out.indices[static_cast<size_t>(a)])].transpose();
+  }
+
+  out.stiffness.setZero(3 * m, 3 * m);
+  out.area_weights.setZero(m);
+  out.normal_weights.setZero(3, m);
+  out.points.clear();
+  out.area = 0.0;
+  const double t = material.thickness;
+  const double membrane = t, bending = t * t * t / 12.0;
+  internal::SurfaceFrame frame;
+  Matrix3Xd bm, bb;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> dbm, dbb;
+  for (size_t q = 0; q < uvs.size(); ++q) {
+    const auto w = basis.middleRows(static_cast<Eigen::Index>(6 * q), 6);
+    if (!internal::compute_frame(w, x, material.youngs_modulus, material.poisson_ratio, frame)) {
+      std::ostringstream msg;
+      msg << "the limit surface of face " << work.face << " is degenerate at (u, v) = (" << uvs[q][0] << ", "
+          << uvs[q][1] << ")" << (work.subface ? " of sub-face " + std::to_string(work.subface) : std::string())
+          << ": its tangents are parallel; check the control points around that face";
+      fail(ErrorCode::kUnprocessable, msg.str());
+    }
+    internal::strain_matrices(w, frame, bm, bb);
+    const double dA = weights[q] * frame.j;
+    dbm.noalias() = (dA * membrane) * frame.material * bm;
+    dbb.noalias() = (dA * bending) * frame.material * bb;
+    out.stiffness.noalias() += bm.transpose() * dbm;
+    out.stiffness.noalias() += bb.transpose() * dbb;
+    out.area_weights.noalias() += dA * w.row(0).transpose();
+    out.normal_weights.noalias() += frame.a3 * (dA * w.row(0));
+    out.area += dA;
+    out.points.push_back({SurfacePoint{work.face, work.subface, uvs[q][0], uvs[q][1]}, weights[q]});
+  }
+}
+
+// Connected components by shared control points (union-find), then 6 rigid modes each.
+void compute_rigid_modes(const ControlMesh& mesh, std::vector<int32_t>& component_of, Eigen::MatrixXd& modes) {
+  const auto n = static_cast<size_t>(mesh.num_vertices());
+  std::vector<int32_t> parent(n);
+  for (size_t i = 0; i < n; ++i) parent[i] = static_cast<int32_t>(i);
+  auto find = [&](int32_t v) {
+    while (parent[static_cast<size_t>(v)] != v) {
+      parent[static_cast<size_t>(v)] = parent[static_cast<size_t>(parent[static_cast<size_t>(v)])];
+      v = parent[static_cast<size_t>(v)];
+    }
+    return v;
+  };
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    auto fv = mesh.face(f);
+    for (size_t i = 1; i < fv.size(); ++i) {
+      const int32_t a = find(fv[0]), b = find(fv[i]);
+      if (a != b) parent[static_cast<size_t>(std::max(a, b))] = std::min(a, b);
+    }
+  }
+  component_of.assign(n, -1);
+  std::vector<int32_t> label(n, -1);
+  int32_t components = 0;
+  for (size_t v = 0; v < n; ++v) {
+    const auto root = static_cast<size_t>(find(static_cast<int32_t>(v)));
+    if (label[root] < 0) label[root] = components++;
+    component_of[v] = label[root];
+  }
+  // Centroid and size of every component.
+  std::vector<Vec3> centre(static_cast<size_t>(components), Vec3::Zero());
+  std::vector<int32_t> count(static_cast<size_t>(components), 0);
+  for (size_t v = 0; v < n; ++v) {
+    centre[static_cast<size_t>(component_of[v])] += mesh.positions()[v];
+    ++count[static_cast<size_t>(component_of[v])];
+  }
+  for (size_t c = 0; c < centre.size(); ++c) centre[c] /= count[c];
+  std::vector<double> size(static_cast<size_t>(components), 0.0);
+  for (size_t v = 0; v < n; ++v) {
+    const auto c = static_cast<size_t>(component_of[v]);
+    size[c] = std::max(size[c], (mesh.positions()[v] - centre[c]).norm());
+  }
+  modes.setZero(static_cast<Eigen::Index>(3 * n), 6 * components);
+  for (size_t v = 0; v < n; ++v) {
+    const auto c = static_cast<size_t>(component_of[v]);
+    const Vec3 r = (mesh.positions()[v] - centre[c]) / (size[c] > 0.0 ? size[c] : 1.0);
+    const Eigen::Index row = static_cast<Eigen::Index>(3 * v), col = static_cast<Eigen::Index>(6 * c);
+    for (int a = 0; a < 3; ++a) {
+      modes(row + a, col + a) = 1.0;
+      Vec3 axis = Vec3::Zero();
+      axis[a] = 1.0;
+      modes.block<3, 1>(row, col + 3 + a) = axis.cross(r);
+    }
+  }
+}
+
+}  // namespace
+
+// Builds ShellModels; a friend of ShellModel so the result can stay immutable afterwards.
+class ShellModelBuilder {
+ public:
+  static std::shared_ptr<const ShellModel> build(const ControlMesh& mesh, const Material& material,
+                                                 const PrecomputeOptions& options);
+};
+
+namespace {
+std::atomic<uint64_t> g_next_model_id{1};
+}  // namespace
+
+ShellModel::ShellModel(LimitEvaluator evaluator, Material material, PrecomputeOptions options)
+    : id_(g_next_model_id++),
+      evaluator_(std::move(evaluator)), material_(material), options_(std::move(options)) {}
+
+std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& mesh, const Material& material,
+                                                           const PrecomputeOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  material.check().value();
+  const QuadratureOptions& quad = options.quadrature;
+  if (quad.gauss_points < 1 || quad.gauss_points > 10 || quad.ev_refinement_levels < 0 ||
+      quad.ev_refinement_levels > 8) {
+    fail(ErrorCode::kInvalidArgument, "quadrature: gauss_points must be 1..10 and ev_refinement_levels 0..8");
+  }
+  LimitEvaluator evaluator = LimitEvaluator::create(mesh, options.evaluator).value();
+  std::shared_ptr<ShellModel> model(new ShellModel(evaluator, material, options));
+  model->options_.progress = nullptr;  // do not keep the caller's callback (and what it captures)
+  model->options_.cancel = nullptr;
+
+  // The (face, sub-face) domains to integrate; ghost faces have no surface.
+  const internal::IrregularCorners irregular(mesh);
+  std::vector<FaceWork> work;
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    if (!evaluator.has_limit_surface(f)) continue;
+    for (int32_t s = 0; s < evaluator.num_subfaces(f); ++s) work.push_back({f, s, irregular.corners(f, s)});
+  }
+  if (work.empty()) fail(ErrorCode::kUnprocessable, "the mesh has no face with a limit surface");
+
+  // Sparsity pattern at control point level: A and B are coupled if some face's support has both.
+  const auto n = static_cast<size_t>(mesh.num_vertices());
+  std::vector<std::vector<int32_t>> neighbours(n);
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    if (!evaluator.has_limit_surface(f)) continue;
+    std::vector<int32_t> support = evaluator.support(f);
+    std::sort(support.begin(), support.end());
+    support.erase(std::unique(support.begin(), support.end()), support.end());
+    for (int32_t b : support) {
+      auto& list = neighbours[static_cast<size_t>(b)];
+      list.insert(list.end(), support.begin(), support.end());
+    }
+  }
+  std::vector<int64_t> column_start(3 * n + 1, 0);
+  for (size_t b = 0; b < n; ++b) {
+    auto& list = neighbours[b];
+    std::sort(list.begin(), list.end());
+    list.erase(std::unique(list.begin(), list.end()), list.end());
+    for (int i = 0; i < 3; ++i) column_start[3 * b + static_cast<size_t>(i) + 1] = static_cast<int64_t>(3 * list.size());
+  }
+  for (size_t c = 0; c < 3 * n; ++c) column_start[c + 1] += column_start[c];
+  const int64_t nnz = column_start.back();
+  if (nnz > std::numeric_limits<int32_t>::max()) {
+    fail(ErrorCode::kResourceExhausted, "the stiffness matrix would have more than 2^31 entries");
+  }
+  Eigen::SparseMatrix<double>& k = model->stiffness_;
+  k.resize(static_cast<Eigen::Index>(3 * n), static_cast<Eigen::Index>(3 * n));
+  k.resizeNonZeros(static_cast<Eigen::Index>(nnz));
+  for (size_t c = 0; c <= 3 * n; ++c) k.outerIndexPtr()[c] = static_cast<int>(column_start[c]);
+  for (size_t b = 0; b < n; ++b) {
+    const auto& list = neighbours[b];
+    for (int i = 0; i < 3; ++i) {
+      int* rows = k.innerIndexPtr() + column_start[3 * b + static_cast<size_t>(i)];
+      for (size_t r = 0; r < list.size(); ++r) {
+        for (int a = 0; a < 3; ++a) rows[3 * r + static_cast<size_t>(a)] = 3 * list[r] + a;
+      }
+    }
+  }
+  std::fill(k.valuePtr(), k.valuePtr() + nnz, 0.0);
+
+  // Elements in fixed-size batches: computed in parallel, accumulated in face order, so K is
+  // bit-for-bit the same for any number of threads.
+  const int threads = internal::resolve_threads(options.threads);
+  constexpr size_t kBatch = 128;
+  std::vector<Element> batch(kBatch);
+  Eigen::VectorXd area_weights = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(n));
+  Eigen::VectorXd normal_weights = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(3 * n));
+  double area = 0.0;
+  std::vector<int64_t> offset;  // position of each local block column in K's value array
+  for (size_t begin = 0; begin < work.size(); begin += kBatch) {
+    if (options.cancel && options.cancel->load()) fail(ErrorCode::kCancelled, "precomputation cancelled");
+    const size_t count = std::min(kBatch, work.size() - begin);
+    internal::parallel_for(0, static_cast<int64_t>(count), threads, [&](int64_t i) {
+      integrate_element(evaluator, material, quad, work[begin + static_cast<size_t>(i)], batch[static_cast<size_t>(i)]);
+    });
+    for (size_t i = 0; i < count; ++i) {
+      const Element& e = batch[i];
+      const auto m = e.indices.size();
+      for (size_t bl = 0; bl < m; ++bl) {
+        const int32_t b = e.indices[bl];
+        const auto& list = neighbours[static_cast<size_t>(b)];
+        for (size_t al = 0; al < m; ++al) {
+          const int32_t a = e.indices[al];
+          const auto rank = static_cast<int64_t>(std::lower_bound(list.begin(), list.end(), a) - list.begin());
+          for (int j = 0; j < 3; ++j) {
+            double* column = k.valuePtr() + column_start[3 * static_cast<size_t>(b) + static_cast<size_t>(j)] + 3 * rank;
+            for (int ii = 0; ii < 3; ++ii) {
+              column[ii] += e.stiffness(static_cast<Eigen::Index>(3 * al) + ii, static_cast<Eigen::Index>(3 * bl) + j);
+            }
+          }
+        }
+        area_weights[b] += e.area_weights[static_cast<Eigen::Index>(bl)];
+        normal_weights.segment<3>(3 * b) += e.normal_weights.col(static_cast<Eigen::Index>(bl));
+      }
+      area += e.area;
+      model->quadrature_.insert(model->quadrature_.end(), e.points.begin(), e.points.end());
+    }
+    if (options.progress) options.progress(static_cast<double>(begin + count) / static_cast<double>(work.size()));
+  }
+  for (Eigen::Index i = 0; i < nnz; ++i) {
+    if (!std::isfinite(k.valuePtr()[i])) {
+      fail(ErrorCode::kUnprocessable, "the stiffness matrix has non-finite entries: the geometry or material is degenerate");
+    }
+  }
+  compute_rigid_modes(mesh, model->component_of_, model->rigid_modes_);
+  model->area_weights_ = std::move(area_weights);
+  model->normal_weights_ = std::move(normal_weights);
+  model->area_ = area;
+  model->build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return model;
+}
+
+Result<std::shared_ptr<const ShellModel>> ShellModel::build(const ControlMesh& mesh, const Material& material,
+                                                            const PrecomputeOptions& options) {
+  return capture([&] { return ShellModelBuilder::build(mesh, material, options); });
+}
+
+double ShellModel::strain_energy(const Eigen::VectorXd& displacement) const {
+  if (displacement.size() != stiffness_.rows()) {
+    fail(ErrorCode::kInvalidArgument, "strain_energy: the displacement vector must have 3n entries");
+  }
+  return 0.5 * displacement.dot(stiffness_ * displacement);
+}
+
+Eigen::VectorXd ShellModel::load_vector(const DeformationRequest& request) const {
+  internal::check_loads(*this, request);
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(num_dofs());
+  for (const PointForce& pf : request.forces) f.segment<3>(3 * pf.index) += pf.force;
+  LimitStencil st;
+  for (const SurfaceForce& sf : request.surface_forces) {
+    evaluator_.stencil(sf.point, st);
+    for (size_t k = 0; k < st.size(); ++k) f.segment<3>(3 * st.indices[k]) += st.position[k] * sf.force;
+  }
+  if (!request.surface_load.isZero(0.0)) {
+    for (Eigen::Index a = 0; a < area_weights_.size(); ++a) f.segment<3>(3 * a) += area_weights_[a] * request.surface_load;
+  }
+  if (request.pressure != 0.0) f += request.pressure * normal_weights_;
+  return f;
+}
+
+size_t ShellModel::memory_bytes() const {
+  const auto nnz = static_cast<size_t>(stiffness_.nonZeros());
+  return sizeof(ShellModel) + nnz * (sizeof(double) + sizeof(int)) +
+         static_cast<size_t>(stiffness_.cols() + 1) * sizeof(int) + quadrature_.size() * sizeof(QuadraturePoint) +
+         static_cast<size_t>(area_weights_.size() + normal_weights_.size()) * sizeof(double) +
+         // the evaluator's mesh copy and Bfr surfaces (estimate)
+         static_cast<size_t>(mesh().num_vertices()) * 24 + mesh().face_indices().size() * 4 +
+         static_cast<size_t>(mesh().num_faces()) * 512;
+}
+
+}  // namespace softshell::engine

@@ -1,0 +1,573 @@
+#include "softshell/engine/solver.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include <Eigen/Dense>
+#include <Eigen/SparseLU>
+
+#include "factor_cache_impl.h"
+#include "factorization.h"
+#include "request_check.h"
+
+namespace softshell::engine {
+
+using internal::Factorization;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+// Extra prescribed DOFs that may be added as constraint rows to a cached factor instead of
+// factorizing again. Each costs one more right-hand side in the triangular solves.
+constexpr size_t kMaxExtraRows = 96;
+
+std::string axis_name(int a) { return std::string(1, "xyz"[a]); }
+
+std::string format_vec(Vec3 v) {
+  // Round-off noise shown as 0 (and never as -0).
+  const double top = v.cwiseAbs().maxCoeff();
+  for (int i = 0; i < 3; ++i) v[i] = std::abs(v[i]) <= 1e-9 * top ? 0.0 : v[i];
+  std::ostringstream s;
+  s.precision(4);
+  s << "(" << v.x() << ", " << v.y() << ", " << v.z() << ")";
+  return s.str();
+}
+
+// One scalar linear equation sum coef * u[dof] = rhs, from a Lagrange, limit or vertex constraint.
+struct Row {
+  std::vector<std::pair<int32_t, double>> terms;  // sorted by DOF, unique
+  double rhs = 0.0;
+  double scale = 0.0;  // magnitude of the equation's terms, for tolerances
+  std::string source;  // for messages, e.g. "limit constraint 2 (y)"
+};
+
+// A request turned into linear algebra: prescribed DOFs, constraint rows and the load vector.
+struct Problem {
+  std::vector<int32_t> fixed;        // sorted DOFs
+  Eigen::VectorXd fixed_value;       // 3n, meaningful on fixed DOFs
+  std::vector<char> is_fixed;        // 3n
+  std::vector<Row> rows;             // with fixed DOFs moved to the right-hand side
+  Eigen::VectorXd load;              // 3n
+};
+
+void add_row(Row row, std::vector<Row>& rows) {
+  std::sort(row.terms.begin(), row.terms.end());
+  std::vector<std::pair<int32_t, double>> merged;
+  for (const auto& t : row.terms) {
+    if (!merged.empty() && merged.back().first == t.first) {
+      merged.back().second += t.second;
+    } else {
+      merged.push_back(t);
+    }
+  }
+  row.terms.clear();
+  for (const auto& t : merged) {
+    if (t.second != 0.0) row.terms.push_back(t);
+  }
+  row.scale = 0.0;
+  for (const auto& t : row.terms) row.scale = std::max(row.scale, std::abs(t.second));
+  if (row.terms.empty()) {
+    if (row.rhs == 0.0) return;  // 0 = 0: dropped (PROTOCOL.md)
+    fail(ErrorCode::kUnprocessable, row.source + " has only zero coefficients but asks for the value " +
+                                        std::to_string(row.rhs) + "; no displacement can satisfy it");
+  }
+  rows.push_back(std::move(row));
+}
+
+Problem build_problem(const ShellModel& model, const DeformationRequest& request) {
+  internal::check_request(model, request);
+  const int32_t ndof = model.num_dofs();
+  Problem p;
+  p.fixed_value = Eigen::VectorXd::Zero(ndof);
+  p.is_fixed.assign(static_cast<size_t>(ndof), 0);
+  std::vector<int32_t> fixed_by(static_cast<size_t>(ndof), -1);
+  const double length = std::max(model.mesh().bounding_diagonal(), 1e-300);
+
+  // Prescribed DOFs; the same DOF twice must agree.
+  for (size_t i = 0; i < request.vertex_constraints.size(); ++i) {
+    const VertexConstraint& c = request.vertex_constraints[i];
+    for (int a = 0; a < 3; ++a) {
+      if (!(c.mask & (1u << a))) continue;
+      const int32_t dof = 3 * c.index + a;
+      const double value = c.displacement[a];
+      if (p.is_fixed[static_cast<size_t>(dof)]) {
+        const double have = p.fixed_value[dof];
+        if (std::abs(have - value) > 1e-9 * std::max({std::abs(have), std::abs(value), 1e-6 * length})) {
+          fail(ErrorCode::kUnprocessable,
+               "vertex constraints " + std::to_string(fixed_by[static_cast<size_t>(dof)]) + " and " + std::to_string(i) +
+                   " prescribe different displacements for control point " + std::to_string(c.index) + " along " +
+                   axis_name(a) + " (" + std::to_string(have) + " and " + std::to_string(value) + ")");
+        }
+        continue;
+      }
+      p.is_fixed[static_cast<size_t>(dof)] = 1;
+      p.fixed_value[dof] = value;
+      fixed_by[static_cast<size_t>(dof)] = static_cast<int32_t>(i);
+      p.fixed.push_back(dof);
+    }
+  }
+  std::sort(p.fixed.begin(), p.fixed.end());
+
+  // Lagrange constraints: one equation per axis.
+  std::vector<Row> rows;
+  for (size_t i = 0; i < request.lagrange_constraints.size(); ++i) {
+    const LagrangeConstraint& c = request.lagrange_constraints[i];
+    for (int a = 0; a < 3; ++a) {
+      Row row;
+      row.source = "Lagrange constraint " + std::to_string(i) + " (" + axis_name(a) + ")";
+      row.rhs = c.values[a];
+      for (size_t k = 0; k < c.indices.size(); ++k) row.terms.push_back({3 * c.indices[k] + a, c.coefficients[k][a]});
+      add_row(std::move(row), rows);
+    }
+  }
+  // Limit constraints: position (and tangents) of the limit surface through its stencil.
+  LimitStencil st;
+  for (size_t i = 0; i < request.limit_constraints.size(); ++i) {
+    const LimitConstraint& c = request.limit_constraints[i];
+    model.evaluator().stencil(c.point, st);
+    auto add = [&](const std::vector<double>& weights, const Vec3& target, const char* what) {
+      for (int a = 0; a < 3; ++a) {
+        Row row;
+        row.source = "limit constraint " + std::to_string(i) + " (" + what + axis_name(a) + ")";
+        row.rhs = target[a];
+        for (size_t k = 0; k < st.size(); ++k) row.terms.push_back({3 * st.indices[k] + a, weights[k]});
+        add_row(std::move(row), rows);
+      }
+    };
+    add(st.position, c.displacement, "");
+    if (c.du_displacement) add(st.du, *c.du_displacement, "du ");
+    if (c.dv_displacement) add(st.dv, *c.dv_displacement, "dv ");
+  }
+
+  // Move prescribed DOFs to the right-hand side; rows left with nothing must already hold.
+  for (Row& row : rows) {
+    double moved = 0.0;
+    std::vector<std::pair<int32_t, double>> free_terms;
+    for (const auto& [dof, coef] : row.terms) {
+      if (p.is_fixed[static_cast<size_t>(dof)]) {
+        moved += coef * p.fixed_value[dof];
+      } else {
+        free_terms.push_back({dof, coef});
+      }
+    }
+    const double original = row.rhs;
+    row.rhs -= moved;
+    row.terms = std::move(free_terms);
+    if (row.terms.empty()) {
+      if (std::abs(row.rhs) > 1e-9 * std::max({std::abs(original), std::abs(moved), 1e-9 * length})) {
+        fail(ErrorCode::kUnprocessable, row.source +
+                                            " contradicts the vertex constraints: every control point it depends on "
+                                            "is prescribed, and their displacements do not satisfy it");
+      }
+      continue;
+    }
+    p.rows.push_back(std::move(row));
+  }
+  p.load = model.load_vector(request);
+  return p;
+}
+
+// Rigid-body motions that the prescribed DOFs leave free: an orthonormal basis N (6c x r) of
+// combinations of the model's rigid modes that vanish on every prescribed DOF.
+Eigen::MatrixXd free_rigid_combinations(const ShellModel& model, const std::vector<int32_t>& fixed) {
+  const Eigen::MatrixXd& modes = model.rigid_modes();
+  const Eigen::Index m = modes.cols();
+  Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(m, m);
+  for (int32_t dof : fixed) gram.noalias() += modes.row(dof).transpose() * modes.row(dof);
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(gram);
+  const double top = std::max(1.0, eig.eigenvalues().cwiseAbs().maxCoeff());
+  std::vector<Eigen::Index> null;
+  for (Eigen::Index i = 0; i < m; ++i) {
+    if (eig.eigenvalues()[i] <= 1e-11 * top) null.push_back(i);
+  }
+  Eigen::MatrixXd basis(m, static_cast<Eigen::Index>(null.size()));
+  for (size_t k = 0; k < null.size(); ++k) basis.col(static_cast<Eigen::Index>(k)) = eig.eigenvectors().col(null[k]);
+  return basis;
+}
+
+// Describes a rigid motion given as a combination of the rigid modes, for error messages.
+std::string describe_rigid_motion(const ShellModel& model, const Eigen::VectorXd& combination) {
+  Eigen::Index best = 0;
+  for (Eigen::Index c = 0; c < combination.size() / 6; ++c) {
+    if (combination.segment<6>(6 * c).norm() > combination.segment<6>(6 * best).norm()) best = c;
+  }
+  // Centroid and size of that component (as in compute_rigid_modes).
+  const auto& comp = model.component_of();
+  Vec3 centre = Vec3::Zero();
+  int count = 0;
+  int32_t example = -1;
+  for (size_t v = 0; v < comp.size(); ++v) {
+    if (comp[v] != best) continue;
+    centre += model.mesh().positions()[v];
+    ++count;
+    if (example < 0) example = static_cast<int32_t>(v);
+  }
+  centre /= std::max(count, 1);
+  double size = 0.0;
+  for (size_t v = 0; v < comp.size(); ++v) {
+    if (comp[v] == best) size = std::max(size, (model.mesh().positions()[v] - centre).norm());
+  }
+  if (size <= 0.0) size = 1.0;
+  const Vec3 t = combination.segment<3>(6 * best);
+  const Vec3 w = combination.segment<3>(6 * best + 3) / size;
+  std::string part = model.num_components() > 1
+                         ? "part " + std::to_string(best) + " of the object (the one with control point " +
+                               std::to_string(example) + ")"
+                         : "the object";
+  // Directions are reported with their largest component positive.
+  auto direction = [](Vec3 v) {
+    v.normalize();
+    Eigen::Index largest = 0;
+    v.cwiseAbs().maxCoeff(&largest);
+    return v[largest] < 0.0 ? Vec3(-v) : v;
+  };
+  std::string motion;
+  if (w.norm() * size < 1e-6 * t.norm()) {
+    motion = "translate along " + format_vec(direction(t));
+  } else {
+    const Vec3 through = centre + w.cross(t) / w.squaredNorm();
+    motion = "rotate about the axis along " + format_vec(direction(w)) + " through " + format_vec(through);
+  }
+  return "the constraints leave a rigid-body motion free: " + part + " can " + motion +
+         " without any strain. Add vertex, Lagrange or limit constraints that hold it (a free body needs at least "
+         "three non-collinear held points)";
+}
+
+// Throws kUnprocessable if the prescribed DOFs and the rows leave a rigid-body motion free.
+void check_determined(const ShellModel& model, const Problem& p) {
+  const Eigen::MatrixXd null = free_rigid_combinations(model, p.fixed);
+  if (null.cols() == 0) return;
+  const Eigen::MatrixXd& modes = model.rigid_modes();
+  // Each row applied to each free rigid motion.
+  Eigen::MatrixXd seen = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(p.rows.size()), null.cols());
+  for (size_t r = 0; r < p.rows.size(); ++r) {
+    Eigen::RowVectorXd acc = Eigen::RowVectorXd::Zero(modes.cols());
+    for (const auto& [dof, coef] : p.rows[r].terms) acc.noalias() += coef / p.rows[r].scale * modes.row(dof);
+    seen.row(static_cast<Eigen::Index>(r)) = acc * null;
+  }
+  Eigen::VectorXd combination;
+  if (seen.rows() == 0) {
+    combination = null.col(0);
+  } else {
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(seen, Eigen::ComputeFullV);
+    const auto& s = svd.singularValues();
+    const Eigen::Index r = null.cols();
+    // The smallest singular value (or a missing one when there are fewer rows than modes).
+    if (s.size() == r && s[r - 1] > 1e-8 * std::max(1.0, s[0])) return;
+    combination = null * svd.matrixV().col(r - 1);
+  }
+  fail(ErrorCode::kUnprocessable, describe_rigid_motion(model, combination));
+}
+
+// Pins for a factorization with prescribed DOFs `fixed`: one DOF per free rigid motion, chosen
+// by pivoted QR so that the rest of K is positive definite.
+std::vector<int32_t> choose_pins(const ShellModel& model, const std::vector<int32_t>& fixed) {
+  const Eigen::MatrixXd null = free_rigid_combinations(model, fixed);
+  if (null.cols() == 0) return {};
+  Eigen::MatrixXd motions = model.rigid_modes() * null;  // 3n x r
+  for (int32_t dof : fixed) motions.row(dof).setZero();
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(motions.transpose());
+  std::vector<int32_t> pins;
+  for (Eigen::Index k = 0; k < null.cols(); ++k) pins.push_back(static_cast<int32_t>(qr.colsPermutation().indices()[k]));
+  std::sort(pins.begin(), pins.end());
+  return pins;
+}
+
+// The small dense symmetric system of the Schur complement, decomposed once and solved for
+// several right-hand sides (iterative refinement): symmetric diagonal scaling, then a complete
+// orthogonal decomposition (minimum-norm solution when redundant constraints make it singular).
+class SmallSystem {
+ public:
+  explicit SmallSystem(const Eigen::MatrixXd& s) : scale_(s.rows()) {
+    for (Eigen::Index i = 0; i < s.rows(); ++i) {
+      const double diag = std::abs(s(i, i));
+      const double mag = diag > 0.0 ? diag : s.row(i).cwiseAbs().maxCoeff();
+      scale_[i] = mag > 0.0 ? 1.0 / std::sqrt(mag) : 1.0;
+    }
+    if (s.rows() == 0) return;
+    cod_.setThreshold(1e-11);
+    cod_.compute(scale_.asDiagonal() * s * scale_.asDiagonal());
+  }
+  Eigen::VectorXd solve(const Eigen::VectorXd& r) const {
+    if (r.size() == 0) return Eigen::VectorXd();
+    return scale_.asDiagonal() * cod_.solve(scale_.asDiagonal() * r);
+  }
+
+ private:
+  Eigen::VectorXd scale_;
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod_;
+};
+
+// Checks that the solution meets every row and is finite; kUnprocessable otherwise.
+void check_solution(const Problem& p, const Eigen::VectorXd& u, double length) {
+  if (!u.allFinite()) {
+    fail(ErrorCode::kUnprocessable, "the system could not be solved to finite displacements (it is singular)");
+  }
+  const double scale = std::max(u.cwiseAbs().maxCoeff(), 1e-12 * length);
+  for (const Row& row : p.rows) {
+    double lhs = 0.0;
+    for (const auto& [dof, coef] : row.terms) lhs += coef * u[dof];
+    if (std::abs(lhs - row.rhs) > 1e-7 * row.scale * scale + 1e-12 * std::abs(row.rhs)) {
+      fail(ErrorCode::kUnprocessable, "the constraints contradict each other: " + row.source +
+                                          " cannot be met together with the others (residual " +
+                                          std::to_string(lhs - row.rhs) + ")");
+    }
+  }
+}
+
+}  // namespace
+
+std::vector<Vec3> Solution::positions(const ControlMesh& mesh) const {
+  std::vector<Vec3> out = mesh.positions();
+  for (size_t i = 0; i < out.size(); ++i) out[i] += displacement.segment<3>(static_cast<Eigen::Index>(3 * i));
+  return out;
+}
+
+Solver::Solver(std::shared_ptr<const ShellModel> model, std::shared_ptr<FactorCache> cache)
+    : model_(std::move(model)), cache_(std::move(cache)) {
+  if (!model_) fail(ErrorCode::kInvalidArgument, "Solver needs a model");
+  if (!cache_) cache_ = std::make_shared<FactorCache>();
+}
+
+Result<Solution> Solver::solve(const DeformationRequest& request) const {
+  try {
+    return solve_on_cached_factor(request);
+  } catch (const internal::FactorizationFailed&) {
+    // A mechanism (part of the shell moving without strain) that the rigid-mode analysis did not
+    // catch: the full KKT system tells whether the constraints hold it.
+    return solve_with_fallback(request);
+  } catch (const Exception& e) {
+    return e.error();
+  } catch (const std::bad_alloc&) {
+    return Error{ErrorCode::kResourceExhausted, "out of memory while solving"};
+  } catch (const std::exception& e) {
+    return Error{ErrorCode::kInternal, std::string("internal error: ") + e.what()};
+  }
+}
+
+Solution Solver::solve_on_cached_factor(const DeformationRequest& request) const {
+  {
+    const auto start = Clock::now();
+    const ShellModel& model = *model_;
+    Problem p = build_problem(model, request);
+    check_determined(model, p);
+
+    // A cached factor whose prescribed DOFs are a subset of ours; the rest become rows.
+    FactorCache::Impl& cache = cache_->impl();
+    bool hit = true;
+    std::shared_ptr<const Factorization> factor = cache.find_subset(model.id(), p.fixed, kMaxExtraRows);
+    if (!factor) {
+      factor = cache.get(model.id(), p.fixed,
+                         [&] { return std::make_shared<const Factorization>(model, p.fixed, choose_pins(model, p.fixed)); },
+                         hit);
+    }
+    Solution solution;
+    solution.stats.path = SolvePath::kCachedFactor;
+    solution.stats.factor_cache_hit = hit;
+    solution.stats.factor_ms = hit ? 0.0 : factor->factor_ms();
+
+    // Rows: the request's rows plus prescribed DOFs the factor does not eliminate.
+    std::vector<Row> rows = p.rows;
+    {
+      std::vector<int32_t> extra;
+      std::set_difference(p.fixed.begin(), p.fixed.end(), factor->fixed().begin(), factor->fixed().end(),
+                          std::back_inserter(extra));
+      for (int32_t dof : extra) {
+        Row row;
+        row.terms = {{dof, 1.0}};
+        row.rhs = p.fixed_value[dof];
+        row.scale = 1.0;
+        row.source = "vertex constraint on control point " + std::to_string(dof / 3) + " (" + axis_name(dof % 3) + ")";
+        rows.push_back(std::move(row));
+      }
+    }
+    // Rows were reduced with the request's prescribed values; the extra ones re-impose them, so
+    // terms on DOFs the factor eliminates never appear.
+    const Eigen::SparseMatrix<double>& k = model.stiffness();
+    const std::vector<int32_t>& pins = factor->pinned();
+    const auto na = static_cast<Eigen::Index>(factor->factored().size());
+    const auto nq = static_cast<Eigen::Index>(pins.size());
+    const auto nr = static_cast<Eigen::Index>(rows.size());
+    solution.stats.constraint_rows = static_cast<int32_t>(nr);
+
+    // Right-hand side of the unknown DOFs: loads minus the pull of the factor's prescribed DOFs.
+    Eigen::VectorXd u_fixed = Eigen::VectorXd::Zero(model.num_dofs());
+    for (int32_t dof : factor->fixed()) u_fixed[dof] = p.fixed_value[dof];
+    const Eigen::VectorXd b = p.load - k * u_fixed;
+
+    // Block right-hand side [b_a | K_aQ | C_a^T] and the small matrix M = [[K_QQ, C_Q^T], [C_Q, 0]].
+    std::vector<int32_t> pin_index(static_cast<size_t>(model.num_dofs()), -1);
+    for (size_t q = 0; q < pins.size(); ++q) pin_index[static_cast<size_t>(pins[q])] = static_cast<int32_t>(q);
+    Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(na, 1 + nq + nr);
+    Eigen::MatrixXd m = Eigen::MatrixXd::Zero(nq + nr, nq + nr);
+    Eigen::VectorXd b_small = Eigen::VectorXd::Zero(nq + nr);
+    for (Eigen::Index i = 0; i < na; ++i) rhs(i, 0) = b[factor->factored()[static_cast<size_t>(i)]];
+    for (Eigen::Index q = 0; q < nq; ++q) {
+      const int32_t pin = pins[static_cast<size_t>(q)];
+      b_small[q] = b[pin];
+      for (Eigen::SparseMatrix<double>::InnerIterator it(k, pin); it; ++it) {
+        const auto row = static_cast<int32_t>(it.row());
+        if (const int32_t a = factor->position(row); a >= 0) {
+          rhs(a, 1 + q) = it.value();
+        } else if (const int32_t q2 = pin_index[static_cast<size_t>(row)]; q2 >= 0) {
+          m(q2, q) = it.value();
+        }
+      }
+    }
+    for (Eigen::Index r = 0; r < nr; ++r) {
+      const Row& row = rows[static_cast<size_t>(r)];
+      b_small[nq + r] = row.rhs;
+      for (const auto& [dof, coef] : row.terms) {
+        if (const int32_t a = factor->position(dof); a >= 0) {
+          rhs(a, 1 + nq + r) += coef;
+        } else if (const int32_t q = pin_index[static_cast<size_t>(dof)]; q >= 0) {
+          m(nq + r, q) += coef;
+          m(q, nq + r) += coef;
+        } else {
+          fail(ErrorCode::kInternal, "solver: a constraint row refers to an eliminated DOF");
+        }
+      }
+    }
+
+    // Schur complement on the cached factor: S = M - H^T K_aa^-1 H. A block right-hand side
+    // (r_a, r_small) is then solved by y = S^-1 (r_small - H^T K_aa^-1 r_a),
+    // x_a = K_aa^-1 r_a - K_aa^-1 H y.
+    const Eigen::MatrixXd z = factor->solve(rhs);
+    const auto h = rhs.rightCols(nq + nr);
+    const auto z_h = z.rightCols(nq + nr);
+    const SmallSystem small(m - h.transpose() * z_h);
+    Eigen::VectorXd y = small.solve(b_small - h.transpose() * z.col(0));
+    Eigen::VectorXd u_a = z.col(0) - z_h * y;
+
+    // Iterative refinement against the full system's residual: brings the constraints and the
+    // equilibrium to round-off even when the small system is large and redundant.
+    Eigen::VectorXd u = u_fixed;
+    auto scatter = [&] {
+      for (Eigen::Index i = 0; i < na; ++i) u[factor->factored()[static_cast<size_t>(i)]] = u_a[i];
+      for (Eigen::Index q = 0; q < nq; ++q) u[pins[static_cast<size_t>(q)]] = y[q];
+    };
+    scatter();
+    for (int step = 0; step < 3 && nr + nq > 0; ++step) {
+      // Residual of K u + C^T lambda = b on the unknown DOFs, and of C u = d.
+      Eigen::VectorXd force = p.load - k * u;
+      for (Eigen::Index r = 0; r < nr; ++r) {
+        for (const auto& [dof, coef] : rows[static_cast<size_t>(r)].terms) force[dof] -= coef * y[nq + r];
+      }
+      Eigen::VectorXd res_a(na), res_small(nq + nr);
+      for (Eigen::Index i = 0; i < na; ++i) res_a[i] = force[factor->factored()[static_cast<size_t>(i)]];
+      for (Eigen::Index q = 0; q < nq; ++q) res_small[q] = force[pins[static_cast<size_t>(q)]];
+      double worst = 0.0, worst_scale = 0.0;
+      for (Eigen::Index r = 0; r < nr; ++r) {
+        const Row& row = rows[static_cast<size_t>(r)];
+        double lhs = 0.0;
+        for (const auto& [dof, coef] : row.terms) lhs += coef * u[dof];
+        res_small[nq + r] = row.rhs - lhs;
+        worst = std::max(worst, std::abs(row.rhs - lhs) / row.scale);
+        worst_scale = std::max(worst_scale, std::abs(row.rhs) / row.scale);
+      }
+      if (nq == 0 && worst <= 1e-15 * std::max(worst_scale, u.cwiseAbs().maxCoeff())) break;
+      const Eigen::VectorXd z_r = factor->solve(res_a);
+      const Eigen::VectorXd dy = small.solve(res_small - h.transpose() * z_r);
+      u_a += z_r - z_h * dy;
+      y += dy;
+      scatter();
+    }
+    for (int32_t dof : p.fixed) u[dof] = p.fixed_value[dof];
+
+    check_solution(p, u, model.mesh().bounding_diagonal());
+    solution.displacement = std::move(u);
+    solution.stats.solve_ms = ms_since(start);
+    return solution;
+  }
+}
+
+Result<Solution> Solver::solve_with_fallback(const DeformationRequest& request) const {
+  return capture([&]() -> Solution {
+    const auto start = Clock::now();
+    const ShellModel& model = *model_;
+    Problem p = build_problem(model, request);
+    check_determined(model, p);
+
+    // Unknowns: the DOFs that are not prescribed.
+    const int32_t ndof = model.num_dofs();
+    std::vector<int32_t> index(static_cast<size_t>(ndof), -1);
+    std::vector<int32_t> free_dofs;
+    for (int32_t d = 0; d < ndof; ++d) {
+      if (!p.is_fixed[static_cast<size_t>(d)]) {
+        index[static_cast<size_t>(d)] = static_cast<int32_t>(free_dofs.size());
+        free_dofs.push_back(d);
+      }
+    }
+    const auto nf = static_cast<Eigen::Index>(free_dofs.size());
+    const Eigen::SparseMatrix<double>& k = model.stiffness();
+    Eigen::VectorXd u_fixed = Eigen::VectorXd::Zero(ndof);
+    for (int32_t dof : p.fixed) u_fixed[dof] = p.fixed_value[dof];
+    const Eigen::VectorXd b = p.load - k * u_fixed;
+
+    // Independent rows only (redundant ones are checked afterwards), scaled to K's magnitude.
+    std::vector<size_t> independent;
+    if (!p.rows.empty()) {
+      Eigen::MatrixXd ct = Eigen::MatrixXd::Zero(nf, static_cast<Eigen::Index>(p.rows.size()));
+      for (size_t r = 0; r < p.rows.size(); ++r) {
+        for (const auto& [dof, coef] : p.rows[r].terms) {
+          ct(index[static_cast<size_t>(dof)], static_cast<Eigen::Index>(r)) = coef / p.rows[r].scale;
+        }
+      }
+      Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(ct);
+      qr.setThreshold(1e-10);
+      for (Eigen::Index i = 0; i < qr.rank(); ++i) independent.push_back(static_cast<size_t>(qr.colsPermutation().indices()[i]));
+      std::sort(independent.begin(), independent.end());
+    }
+    double k_scale = 0.0;
+    for (int32_t d : free_dofs) k_scale = std::max(k_scale, std::abs(k.coeff(d, d)));
+    if (k_scale <= 0.0) k_scale = 1.0;
+
+    const auto nc = static_cast<Eigen::Index>(independent.size());
+    std::vector<Eigen::Triplet<double>> triplets;
+    triplets.reserve(static_cast<size_t>(k.nonZeros()));
+    for (int32_t col : free_dofs) {
+      for (Eigen::SparseMatrix<double>::InnerIterator it(k, col); it; ++it) {
+        const int32_t row = index[static_cast<size_t>(it.row())];
+        if (row >= 0) triplets.emplace_back(row, index[static_cast<size_t>(col)], it.value());
+      }
+    }
+    Eigen::VectorXd rhs(nf + nc);
+    for (Eigen::Index i = 0; i < nf; ++i) rhs[i] = b[free_dofs[static_cast<size_t>(i)]];
+    for (Eigen::Index c = 0; c < nc; ++c) {
+      const Row& row = p.rows[independent[static_cast<size_t>(c)]];
+      const double w = k_scale / row.scale;
+      for (const auto& [dof, coef] : row.terms) {
+        triplets.emplace_back(nf + c, index[static_cast<size_t>(dof)], w * coef);
+        triplets.emplace_back(index[static_cast<size_t>(dof)], nf + c, w * coef);
+      }
+      rhs[nf + c] = w * row.rhs;
+    }
+    Eigen::SparseMatrix<double> kkt(nf + nc, nf + nc);
+    kkt.setFromTriplets(triplets.begin(), triplets.end());
+    kkt.makeCompressed();
+    Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu;
+    lu.compute(kkt);
+    if (lu.info() != Eigen::Success) {
+      fail(ErrorCode::kUnprocessable,
+           "the system is singular: the constraints do not determine the deformation, or the control mesh has "
+           "displacement modes that do not move its limit surface (a cube whose vertices all have valence 3 has "
+           "one); subdividing the mesh once removes such modes");
+    }
+    const Eigen::VectorXd x = lu.solve(rhs);
+    Eigen::VectorXd u = u_fixed;
+    for (Eigen::Index i = 0; i < nf; ++i) u[free_dofs[static_cast<size_t>(i)]] = x[i];
+    check_solution(p, u, model.mesh().bounding_diagonal());
+    Solution solution;
+    solution.displacement = std::move(u);
+    solution.stats.path = SolvePath::kFallback;
+    solution.stats.constraint_rows = static_cast<int32_t>(nc);
+    solution.stats.solve_ms = ms_since(start);
+    return solution;
+  });
+}
+
+}  // namespace softshell::engine

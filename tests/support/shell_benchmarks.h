@@ -1,0 +1,51 @@
+#pragma once
+// Classic thin-shell benchmark geometries as Catmull-Clark control meshes (shared by the engine
+// tests and tests/bench). See shell-theory notes §2 and the README's accuracy tables.
+
+#include <vector>
+
+#include "softshell/control_mesh.h"
+#include "softshell/deformation.h"
+#include "softshell/material.h"
+
+namespace softshell::test {
+
+/// Square plate [0, a]^2 in z = 0 with n x n faces. With `ghost_ring`, one more ring of faces
+/// lies outside the plate and the mesh uses BoundaryMode::kNone, so the interior faces are the
+/// plate (a full B-spline space up to the edges, for exact clamped conditions).
+struct Plate {
+  ControlMesh mesh;
+  int n = 0;           // faces per side of the physical plate
+  bool ghost = false;
+  int points_per_side = 0;
+  int index(int i, int j) const { return j * points_per_side + i; }  // control point (i, j)
+  /// The surface point at the plate's centre (n even).
+  SurfacePoint centre() const;
+  /// The face and (u, v) of plate parameter (s, t) in [0, 1]^2.
+  SurfacePoint at(double s, double t) const;
+};
+Plate make_plate(int n, double a, bool ghost_ring = false);
+
+/// Vertex constraints of a simply supported plate: w = 0 on the boundary row, in-plane DOFs fixed.
+std::vector<VertexConstraint> simply_supported(const Plate& plate);
+/// In-plane DOFs fixed everywhere (the flat plate's membrane part decouples).
+std::vector<VertexConstraint> in_plane_fixed(const Plate& plate);
+
+/// The Scordelis-Lo roof: R = 25, L = 50, +-40 degrees, with nt faces around and nl along.
+/// Control points are fitted so that the limit surface passes through the cylinder at every
+/// vertex of the control grid (the limit of a control point is not the point).
+struct ScordelisLo {
+  ControlMesh mesh;
+  int nt = 0, nl = 0;
+  int index(int i, int j) const { return j * (nt + 1) + i; }  // i around, j along
+  /// The surface point at the middle of the free edge at theta = -40 degrees.
+  SurfacePoint free_edge_midpoint() const;
+  static constexpr double kRadius = 25.0, kLength = 50.0, kHalfAngleDeg = 40.0;
+  static Material material() { return Material{4.32e8, 0.0, 0.25, 0.0}; }
+  /// Rigid diaphragms at both curved ends (u_x = u_z = 0) and one axial DOF.
+  std::vector<VertexConstraint> supports() const;
+  static constexpr double kReference = 0.3006;  // Kirchhoff-Love converged value (GeoPDEs 0.3005925)
+};
+ScordelisLo make_scordelis_lo(int nt, int nl);
+
+}  // namespace softshell::test
