@@ -131,6 +131,35 @@ TEST(Solver, FreeBodyHeldOnlyByLimitConstraints) {
   EXPECT_LT((limit_displacement(*model, fast->displacement, {20, 0, 0.5, 0.5}) - Vec3(0, 0, 0.05)).norm(), 1e-11);
 }
 
+// The cube's checkerboard modes do not move its limit surface: limit constraints cannot hold them,
+// so the solver fixes their amplitude to zero; a force on a control point would act on them.
+TEST(Solver, InvisibleControlMeshModesAreGaugedAway) {
+  ControlMesh cube = test::load_asset_mesh("catmark_cube.obj");
+  auto model = build(cube);
+  ASSERT_EQ(model->invisible_modes().size(), 3u);
+  for (bool invisible : model->invisible_modes()) EXPECT_TRUE(invisible);
+  Solver solver(model, std::make_shared<FactorCache>());
+  DeformationRequest request;
+  request.limit_constraints.push_back({{0, 0, 0.5, 0.5}, Vec3::Zero(), {}, {}});
+  request.limit_constraints.push_back({{1, 0, 0.5, 0.5}, Vec3::Zero(), {}, {}});
+  request.limit_constraints.push_back({{2, 0, 0.5, 0.5}, Vec3::Zero(), {}, {}});
+  request.limit_constraints.push_back({{4, 0, 0.3, 0.5}, Vec3(0.0, 0.05, 0.0), {}, {}});
+  auto fast = solver.solve(request);
+  ASSERT_TRUE(fast.ok()) << fast.error().message;
+  auto slow = solver.solve_with_fallback(request);
+  ASSERT_TRUE(slow.ok()) << slow.error().message;
+  EXPECT_LT(relative_difference(fast->displacement, slow->displacement), 1e-9);
+  EXPECT_LT((limit_displacement(*model, fast->displacement, {4, 0, 0.3, 0.5}) - Vec3(0.0, 0.05, 0.0)).norm(), 1e-12);
+  const Eigen::MatrixXd& modes = model->zero_energy_modes();
+  for (Eigen::Index k = model->num_rigid_modes(); k < modes.cols(); ++k) {
+    EXPECT_LT(std::abs(modes.col(k).dot(fast->displacement)), 1e-12);
+  }
+  request.forces.push_back({3, Vec3(0.0, 0.0, 1.0)});
+  auto pushed = solver.solve(request);
+  ASSERT_FALSE(pushed.ok());
+  EXPECT_NE(pushed.error().message.find("surface force"), std::string::npos) << pushed.error().message;
+}
+
 TEST(Solver, UndeterminedSystemsSayWhatIsFree) {
   Cantilever c;
   auto model = build(c.mesh);

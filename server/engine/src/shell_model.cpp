@@ -6,6 +6,8 @@
 #include <sstream>
 #include <string>
 
+#include <Eigen/Dense>
+
 #include "kirchhoff_love.h"
 #include "parallel.h"
 #include "quadrature.h"
@@ -130,6 +132,71 @@ void compute_rigid_modes(const ControlMesh& mesh, std::vector<int32_t>& componen
       axis[a] = 1.0;
       modes.block<3, 1>(row, col + 3 + a) = axis.cross(r);
     }
+  }
+}
+
+// Zero-energy modes beyond the rigid ones, on components small enough for a dense eigensolver.
+// Appends them to `modes` and says for each whether the limit surface moves.
+void find_extra_zero_modes(const ShellModel& model, const Eigen::SparseMatrix<double>& k,
+                           const std::vector<int32_t>& component_of, const Eigen::MatrixXd& rigid,
+                           Eigen::MatrixXd& modes, std::vector<bool>& invisible) {
+  constexpr Eigen::Index kMaxDofs = 600;
+  const int32_t components = static_cast<int32_t>(rigid.cols() / 6);
+  std::vector<std::vector<int32_t>> dofs(static_cast<size_t>(components));
+  for (size_t v = 0; v < component_of.size(); ++v) {
+    for (int a = 0; a < 3; ++a) dofs[static_cast<size_t>(component_of[v])].push_back(static_cast<int32_t>(3 * v) + a);
+  }
+  std::vector<Eigen::VectorXd> extra;
+  for (int32_t c = 0; c < components; ++c) {
+    const auto& d = dofs[static_cast<size_t>(c)];
+    const auto m = static_cast<Eigen::Index>(d.size());
+    if (m > kMaxDofs) continue;
+    Eigen::MatrixXd kc = Eigen::MatrixXd::Zero(m, m);
+    for (Eigen::Index j = 0; j < m; ++j) {
+      for (Eigen::SparseMatrix<double>::InnerIterator it(k, d[static_cast<size_t>(j)]); it; ++it) {
+        const auto i = std::lower_bound(d.begin(), d.end(), static_cast<int32_t>(it.row())) - d.begin();
+        if (i < m && d[static_cast<size_t>(i)] == it.row()) kc(i, j) = it.value();
+      }
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(kc);
+    const double top = eig.eigenvalues().cwiseAbs().maxCoeff();
+    Eigen::Index zero = 0;
+    while (zero < m && eig.eigenvalues()[zero] < 1e-10 * top) ++zero;
+    if (zero <= 6) continue;
+    // The null space minus the rigid modes of this component.
+    Eigen::MatrixXd r(m, 6);
+    for (Eigen::Index i = 0; i < m; ++i) r.row(i) = rigid.block(d[static_cast<size_t>(i)], 6 * c, 1, 6);
+    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(r);
+    const Eigen::MatrixXd q = qr.householderQ() * Eigen::MatrixXd::Identity(m, 6);
+    Eigen::MatrixXd null = eig.eigenvectors().leftCols(zero);
+    null -= q * (q.transpose() * null);
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(null, Eigen::ComputeThinU);
+    for (Eigen::Index s = 0; s < svd.singularValues().size(); ++s) {
+      if (svd.singularValues()[s] < 1e-6) break;
+      Eigen::VectorXd v = Eigen::VectorXd::Zero(k.rows());
+      for (Eigen::Index i = 0; i < m; ++i) v[d[static_cast<size_t>(i)]] = svd.matrixU()(i, s);
+      extra.push_back(v);
+    }
+  }
+  modes = rigid;
+  if (extra.empty()) return;
+  modes.conservativeResize(Eigen::NoChange, rigid.cols() + static_cast<Eigen::Index>(extra.size()));
+  for (size_t e = 0; e < extra.size(); ++e) modes.col(rigid.cols() + static_cast<Eigen::Index>(e)) = extra[e];
+  // Invisible if the limit displacement vanishes at every quadrature point of its component.
+  LimitStencil st;
+  for (const Eigen::VectorXd& v : extra) {
+    Eigen::Index first = 0;
+    v.cwiseAbs().maxCoeff(&first);
+    const int32_t component = component_of[static_cast<size_t>(first / 3)];
+    double moved = 0.0;
+    for (const QuadraturePoint& q : model.quadrature()) {
+      if (component_of[static_cast<size_t>(model.mesh().face(q.point.face)[0])] != component) continue;
+      model.evaluator().stencil(q.point, st);
+      Vec3 u = Vec3::Zero();
+      for (size_t a = 0; a < st.size(); ++a) u += st.position[a] * v.segment<3>(3 * st.indices[a]);
+      moved = std::max(moved, u.norm());
+    }
+    invisible.push_back(moved < 1e-9);
   }
 }
 
@@ -258,6 +325,7 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
     }
   }
   compute_rigid_modes(mesh, model->component_of_, model->rigid_modes_);
+  find_extra_zero_modes(*model, k, model->component_of_, model->rigid_modes_, model->zero_modes_, model->invisible_);
   model->area_weights_ = std::move(area_weights);
   model->normal_weights_ = std::move(normal_weights);
   model->area_ = area;

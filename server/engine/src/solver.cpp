@@ -171,10 +171,11 @@ Problem build_problem(const ShellModel& model, const DeformationRequest& request
   return p;
 }
 
-// Rigid-body motions that the prescribed DOFs leave free: an orthonormal basis N (6c x r) of
-// combinations of the model's rigid modes that vanish on every prescribed DOF.
+// Zero-energy motions that the prescribed DOFs leave free: an orthonormal basis N of
+// combinations of the model's zero-energy modes (rigid and extra) that vanish on every prescribed
+// DOF.
 Eigen::MatrixXd free_rigid_combinations(const ShellModel& model, const std::vector<int32_t>& fixed) {
-  const Eigen::MatrixXd& modes = model.rigid_modes();
+  const Eigen::MatrixXd& modes = model.zero_energy_modes();
   const Eigen::Index m = modes.cols();
   Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(m, m);
   for (int32_t dof : fixed) gram.noalias() += modes.row(dof).transpose() * modes.row(dof);
@@ -191,9 +192,20 @@ Eigen::MatrixXd free_rigid_combinations(const ShellModel& model, const std::vect
 
 // Describes a rigid motion given as a combination of the rigid modes, for error messages.
 std::string describe_rigid_motion(const ShellModel& model, const Eigen::VectorXd& combination) {
+  const Eigen::Index rigid = model.num_rigid_modes();
   Eigen::Index best = 0;
-  for (Eigen::Index c = 0; c < combination.size() / 6; ++c) {
+  for (Eigen::Index c = 0; c < rigid / 6; ++c) {
     if (combination.segment<6>(6 * c).norm() > combination.segment<6>(6 * best).norm()) best = c;
+  }
+  if (combination.size() > rigid && combination.tail(combination.size() - rigid).norm() > combination.segment<6>(6 * best).norm()) {
+    Eigen::Index mode = 0;
+    combination.tail(combination.size() - rigid).cwiseAbs().maxCoeff(&mode);
+    Eigen::Index dof = 0;
+    model.zero_energy_modes().col(rigid + mode).cwiseAbs().maxCoeff(&dof);
+    return "the constraints leave a zero-energy mode of the control mesh free (it moves control point " +
+           std::to_string(dof / 3) + " without straining the surface; small closed parts such as a cube whose "
+           "vertices all have valence 3 have such modes). Hold that part with vertex constraints, or subdivide the "
+           "mesh once";
   }
   // Centroid and size of that component (as in compute_rigid_modes).
   const auto& comp = model.component_of();
@@ -232,35 +244,68 @@ std::string describe_rigid_motion(const ShellModel& model, const Eigen::VectorXd
     const Vec3 through = centre + w.cross(t) / w.squaredNorm();
     motion = "rotate about the axis along " + format_vec(direction(w)) + " through " + format_vec(through);
   }
-  return "the constraints leave a rigid-body motion free: " + part + " can " + motion +
+  std::string mixed;
+  if (combination.size() > rigid && combination.tail(combination.size() - rigid).norm() > 1e-6 * combination.norm()) {
+    mixed = " (combined with a zero-energy mode of its control mesh)";
+  }
+  return "the constraints leave a rigid-body motion free: " + part + " can " + motion + mixed +
          " without any strain. Add vertex, Lagrange or limit constraints that hold it (a free body needs at least "
          "three non-collinear held points)";
 }
 
-// Throws kUnprocessable if the prescribed DOFs and the rows leave a rigid-body motion free.
-void check_determined(const ShellModel& model, const Problem& p) {
+// Throws kUnprocessable if the prescribed DOFs and the rows leave a zero-energy motion free.
+// Free motions that do not move the limit surface (invisible control-mesh modes) are not an
+// error: their amplitude is set to zero by adding a row, unless a load acts on them.
+void check_determined(const ShellModel& model, Problem& p) {
   const Eigen::MatrixXd null = free_rigid_combinations(model, p.fixed);
   if (null.cols() == 0) return;
-  const Eigen::MatrixXd& modes = model.rigid_modes();
-  // Each row applied to each free rigid motion.
+  const Eigen::MatrixXd& modes = model.zero_energy_modes();
+  // Each row applied to each free motion.
   Eigen::MatrixXd seen = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(p.rows.size()), null.cols());
   for (size_t r = 0; r < p.rows.size(); ++r) {
     Eigen::RowVectorXd acc = Eigen::RowVectorXd::Zero(modes.cols());
     for (const auto& [dof, coef] : p.rows[r].terms) acc.noalias() += coef / p.rows[r].scale * modes.row(dof);
     seen.row(static_cast<Eigen::Index>(r)) = acc * null;
   }
-  Eigen::VectorXd combination;
+  // The combinations no row holds: the right singular vectors of `seen` with (near) zero
+  // singular values, and all of them when there are fewer rows than motions.
+  Eigen::MatrixXd unheld;
   if (seen.rows() == 0) {
-    combination = null.col(0);
+    unheld = null;
   } else {
     Eigen::JacobiSVD<Eigen::MatrixXd> svd(seen, Eigen::ComputeFullV);
     const auto& s = svd.singularValues();
-    const Eigen::Index r = null.cols();
-    // The smallest singular value (or a missing one when there are fewer rows than modes).
-    if (s.size() == r && s[r - 1] > 1e-8 * std::max(1.0, s[0])) return;
-    combination = null * svd.matrixV().col(r - 1);
+    Eigen::Index held = 0;
+    while (held < s.size() && s[held] > 1e-8 * std::max(1.0, s[0])) ++held;
+    if (held == null.cols()) return;
+    unheld = null * svd.matrixV().rightCols(null.cols() - held);
   }
-  fail(ErrorCode::kUnprocessable, describe_rigid_motion(model, combination));
+  const Eigen::Index rigid = model.num_rigid_modes();
+  const auto& invisible = model.invisible_modes();
+  for (Eigen::Index k = 0; k < unheld.cols(); ++k) {
+    const Eigen::VectorXd combination = unheld.col(k);
+    // Only invisible extra modes may be gauged away.
+    double visible = combination.head(rigid).norm();
+    for (size_t e = 0; e < invisible.size(); ++e) {
+      if (!invisible[e]) visible += std::abs(combination[rigid + static_cast<Eigen::Index>(e)]);
+    }
+    if (visible > 1e-8 * combination.norm()) fail(ErrorCode::kUnprocessable, describe_rigid_motion(model, combination));
+    const Eigen::VectorXd motion = modes * combination;
+    if (std::abs(motion.dot(p.load)) > 1e-9 * motion.cwiseAbs().maxCoeff() * std::max(p.load.cwiseAbs().sum(), 1e-300)) {
+      Eigen::Index dof = 0;
+      motion.cwiseAbs().maxCoeff(&dof);
+      fail(ErrorCode::kUnprocessable,
+           "a force acts on a motion of the control mesh that does not move its limit surface (around control point " +
+               std::to_string(dof / 3) + "); apply it as a surface force at (face, u, v) instead of on control points");
+    }
+    Row row;
+    row.source = "gauge of an invisible control-mesh mode";
+    for (Eigen::Index d = 0; d < motion.size(); ++d) {
+      if (motion[d] != 0.0 && !p.is_fixed[static_cast<size_t>(d)]) row.terms.push_back({static_cast<int32_t>(d), motion[d]});
+    }
+    row.scale = motion.cwiseAbs().maxCoeff();
+    p.rows.push_back(std::move(row));
+  }
 }
 
 // Pins for a factorization with prescribed DOFs `fixed`: one DOF per free rigid motion, chosen
@@ -268,7 +313,7 @@ void check_determined(const ShellModel& model, const Problem& p) {
 std::vector<int32_t> choose_pins(const ShellModel& model, const std::vector<int32_t>& fixed) {
   const Eigen::MatrixXd null = free_rigid_combinations(model, fixed);
   if (null.cols() == 0) return {};
-  Eigen::MatrixXd motions = model.rigid_modes() * null;  // 3n x r
+  Eigen::MatrixXd motions = model.zero_energy_modes() * null;  // 3n x r
   for (int32_t dof : fixed) motions.row(dof).setZero();
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(motions.transpose());
   std::vector<int32_t> pins;
@@ -453,23 +498,29 @@ Solution Solver::solve_on_cached_factor(const DeformationRequest& request) const
     scatter();
     for (int step = 0; step < 3 && nr + nq > 0; ++step) {
       // Residual of K u + C^T lambda = b on the unknown DOFs, and of C u = d.
-      Eigen::VectorXd force = p.load - k * u;
+      const Eigen::VectorXd ku = k * u;
+      Eigen::VectorXd force = p.load - ku;
       for (Eigen::Index r = 0; r < nr; ++r) {
         for (const auto& [dof, coef] : rows[static_cast<size_t>(r)].terms) force[dof] -= coef * y[nq + r];
       }
       Eigen::VectorXd res_a(na), res_small(nq + nr);
       for (Eigen::Index i = 0; i < na; ++i) res_a[i] = force[factor->factored()[static_cast<size_t>(i)]];
       for (Eigen::Index q = 0; q < nq; ++q) res_small[q] = force[pins[static_cast<size_t>(q)]];
-      double worst = 0.0, worst_scale = 0.0;
+      double worst = 0.0;
       for (Eigen::Index r = 0; r < nr; ++r) {
         const Row& row = rows[static_cast<size_t>(r)];
         double lhs = 0.0;
         for (const auto& [dof, coef] : row.terms) lhs += coef * u[dof];
         res_small[nq + r] = row.rhs - lhs;
         worst = std::max(worst, std::abs(row.rhs - lhs) / row.scale);
-        worst_scale = std::max(worst_scale, std::abs(row.rhs) / row.scale);
       }
-      if (nq == 0 && worst <= 1e-15 * std::max(worst_scale, u.cwiseAbs().maxCoeff())) break;
+      // Converged when the constraints hold to ~1e-13 of the displacement scale and equilibrium
+      // to ~1e-12 of the forces involved; each further step costs one more pair of sweeps.
+      const double u_scale = u.cwiseAbs().maxCoeff();
+      const double f_scale = std::max(p.load.cwiseAbs().maxCoeff(), ku.cwiseAbs().maxCoeff());
+      const double equilibrium = std::max(res_a.size() ? res_a.cwiseAbs().maxCoeff() : 0.0,
+                                          nq ? res_small.head(nq).cwiseAbs().maxCoeff() : 0.0);
+      if (worst <= 1e-13 * u_scale && equilibrium <= 1e-12 * f_scale) break;
       const Eigen::VectorXd z_r = factor->solve(res_a);
       const Eigen::VectorXd dy = small.solve(res_small - h.transpose() * z_r);
       u_a += z_r - z_h * dy;

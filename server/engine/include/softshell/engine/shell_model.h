@@ -77,6 +77,16 @@ class ShellModel {
   /// along x, y, z and infinitesimal rotations about x, y, z through the component's centroid
   /// (scaled by 1 / its size). K times any of them is zero up to round-off.
   const Eigen::MatrixXd& rigid_modes() const { return rigid_modes_; }
+  /// Every zero-energy mode: the rigid modes (first 6c columns) followed by the extra modes of
+  /// the control mesh found on components of at most 600 DOFs (for example the checkerboard
+  /// pattern of a cube whose vertices all have valence 3, which Catmull-Clark maps to zero).
+  /// Orthonormal within each component; K times each is zero up to round-off.
+  const Eigen::MatrixXd& zero_energy_modes() const { return zero_modes_; }
+  int32_t num_rigid_modes() const { return static_cast<int32_t>(rigid_modes_.cols()); }
+  /// For each extra mode (column num_rigid_modes() + k): true if it leaves the limit surface where
+  /// it is (the solver then fixes its amplitude to zero when nothing else does).
+  const std::vector<bool>& invisible_modes() const { return invisible_; }
+
   /// Connected component of each control point (0..c-1) and the number of components.
   const std::vector<int32_t>& component_of() const { return component_of_; }
   int32_t num_components() const { return static_cast<int32_t>(rigid_modes_.cols() / 6); }
@@ -108,6 +118,8 @@ class ShellModel {
   Eigen::SparseMatrix<double> stiffness_;
   std::vector<QuadraturePoint> quadrature_;
   Eigen::MatrixXd rigid_modes_;
+  Eigen::MatrixXd zero_modes_;
+  std::vector<bool> invisible_;
   std::vector<int32_t> component_of_;
   Eigen::VectorXd area_weights_;    // n: integral of N_A dA (consistent surface loads)
   Eigen::VectorXd normal_weights_;  // 3n: integral of N_A n dA (pressure)

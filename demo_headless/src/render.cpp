@@ -1,0 +1,191 @@
+#include "render.h"
+
+#include <algorithm>
+#include <cmath>
+
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#define STB_IMAGE_WRITE_STATIC
+#include <stb/stb_image_write.h>
+#include <stb/stb_easy_font.h>
+
+namespace softshell::demo {
+
+Image::Image(int w, int h) : width(w), height(h), rgb(static_cast<size_t>(3 * w * h), 0) {}
+
+void Image::set(int x, int y, const std::array<uint8_t, 3>& c) {
+  if (x < 0 || y < 0 || x >= width || y >= height) return;
+  std::copy(c.begin(), c.end(), rgb.begin() + 3 * (static_cast<ptrdiff_t>(y) * width + x));
+}
+
+Result<void> Image::write_png(const std::filesystem::path& path) const {
+  if (!stbi_write_png(path.string().c_str(), width, height, 3, rgb.data(), 3 * width)) {
+    return Error{ErrorCode::kIoError, "cannot write the PNG '" + path.string() + "'"};
+  }
+  return {};
+}
+
+Camera Camera::framing(const Vec3& lo, const Vec3& hi, const Vec3& from, const Vec3& up) {
+  Camera c;
+  c.target = 0.5 * (lo + hi);
+  const double radius = 0.5 * (hi - lo).norm();
+  const double distance = radius / std::sin(0.5 * c.fov_deg * 3.14159265358979 / 180.0) * 1.05;
+  c.eye = c.target + distance * from.normalized();
+  c.up = up;
+  return c;
+}
+
+std::array<uint8_t, 3> viridis(double t) {
+  static const double table[9][3] = {{68, 1, 84},    {71, 44, 122},  {59, 81, 139},   {44, 113, 142}, {33, 144, 141},
+                                     {39, 173, 129}, {92, 200, 99},  {170, 220, 50},  {253, 231, 37}};
+  t = std::clamp(std::isfinite(t) ? t : 0.0, 0.0, 1.0) * 8.0;
+  const int i = std::min(static_cast<int>(t), 7);
+  const double f = t - i;
+  std::array<uint8_t, 3> c;
+  for (int k = 0; k < 3; ++k) c[static_cast<size_t>(k)] = static_cast<uint8_t>(table[i][k] * (1 - f) + table[i + 1][k] * f + 0.5);
+  return c;
+}
+
+Renderer::Renderer(int width, int height, const Camera& camera)
+    : w_(width * 2), h_(height * 2), camera_(camera),
+      depth_(static_cast<size_t>(w_ * h_), std::numeric_limits<float>::infinity()),
+      colour_(static_cast<size_t>(w_ * h_)) {
+  // Background: a soft vertical gradient.
+  for (int y = 0; y < h_; ++y) {
+    const float t = static_cast<float>(y) / static_cast<float>(h_);
+    for (int x = 0; x < w_; ++x) colour_[static_cast<size_t>(y * w_ + x)] = {245 - 35 * t, 247 - 35 * t, 250 - 30 * t};
+  }
+  const Vec3 f = (camera.target - camera.eye).normalized();
+  const Vec3 s = f.cross(camera.up).normalized();
+  const Vec3 u = s.cross(f);
+  Eigen::Matrix4d view = Eigen::Matrix4d::Identity();
+  view.block<1, 3>(0, 0) = s.transpose();
+  view.block<1, 3>(1, 0) = u.transpose();
+  view.block<1, 3>(2, 0) = -f.transpose();
+  view(0, 3) = -s.dot(camera.eye);
+  view(1, 3) = -u.dot(camera.eye);
+  view(2, 3) = f.dot(camera.eye);
+  const double aspect = static_cast<double>(w_) / h_;
+  const double focal = 1.0 / std::tan(0.5 * camera.fov_deg * 3.14159265358979 / 180.0);
+  const double near = 1e-3 * (camera.eye - camera.target).norm(), far = 1e3 * (camera.eye - camera.target).norm();
+  Eigen::Matrix4d proj = Eigen::Matrix4d::Zero();
+  proj(0, 0) = focal / aspect;
+  proj(1, 1) = focal;
+  proj(2, 2) = (far + near) / (near - far);
+  proj(2, 3) = 2 * far * near / (near - far);
+  proj(3, 2) = -1.0;
+  view_proj_ = proj * view;
+}
+
+void Renderer::draw(const ShadedMesh& mesh) {
+  const auto& verts = *mesh.vertices;
+  // Project every vertex once.
+  std::vector<Eigen::Vector3d> screen(verts.size());
+  for (size_t i = 0; i < verts.size(); ++i) {
+    const Eigen::Vector4d clip = view_proj_ * Eigen::Vector4d(verts[i].x(), verts[i].y(), verts[i].z(), 1.0);
+    screen[i] = Eigen::Vector3d((clip.x() / clip.w() * 0.5 + 0.5) * w_, (0.5 - clip.y() / clip.w() * 0.5) * h_,
+                                clip.w() > 0 ? clip.z() / clip.w() : 2.0);
+  }
+  const Vec3 light = ((camera_.eye - camera_.target).normalized() + 0.6 * camera_.up.normalized() +
+                      0.3 * (camera_.eye - camera_.target).cross(camera_.up).normalized())
+                         .normalized();
+  const Vec3 view_dir = (camera_.eye - camera_.target).normalized();
+  const double range = mesh.scalar_max - mesh.scalar_min;
+  for (const auto& tri : *mesh.triangles) {
+    const Eigen::Vector3d& a = screen[static_cast<size_t>(tri[0])];
+    const Eigen::Vector3d& b = screen[static_cast<size_t>(tri[1])];
+    const Eigen::Vector3d& c = screen[static_cast<size_t>(tri[2])];
+    if (a.z() > 1 || b.z() > 1 || c.z() > 1) continue;  // behind the camera
+    const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
+    if (area == 0.0) continue;
+    const int x0 = std::max(0, static_cast<int>(std::floor(std::min({a.x(), b.x(), c.x()}))));
+    const int x1 = std::min(w_ - 1, static_cast<int>(std::ceil(std::max({a.x(), b.x(), c.x()}))));
+    const int y0 = std::max(0, static_cast<int>(std::floor(std::min({a.y(), b.y(), c.y()}))));
+    const int y1 = std::min(h_ - 1, static_cast<int>(std::ceil(std::max({a.y(), b.y(), c.y()}))));
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        const double px = x + 0.5, py = y + 0.5;
+        const double w0 = ((b.x() - px) * (c.y() - py) - (b.y() - py) * (c.x() - px)) / area;
+        const double w1 = ((c.x() - px) * (a.y() - py) - (c.y() - py) * (a.x() - px)) / area;
+        const double w2 = 1.0 - w0 - w1;
+        if (w0 < 0 || w1 < 0 || w2 < 0) continue;
+        const auto depth = static_cast<float>(w0 * a.z() + w1 * b.z() + w2 * c.z());
+        float& stored = depth_[static_cast<size_t>(y * w_ + x)];
+        if (depth >= stored) continue;
+        stored = depth;
+        Vec3 n = w0 * (*mesh.normals)[static_cast<size_t>(tri[0])] + w1 * (*mesh.normals)[static_cast<size_t>(tri[1])] +
+                 w2 * (*mesh.normals)[static_cast<size_t>(tri[2])];
+        n.normalize();
+        if (n.dot(view_dir) < 0) n = -n;  // two-sided lighting for open shells
+        std::array<double, 3> base = {190, 190, 195};
+        if (mesh.scalar && range > 0) {
+          const double s = w0 * (*mesh.scalar)[static_cast<size_t>(tri[0])] + w1 * (*mesh.scalar)[static_cast<size_t>(tri[1])] +
+                           w2 * (*mesh.scalar)[static_cast<size_t>(tri[2])];
+          const auto c8 = viridis((s - mesh.scalar_min) / range);
+          base = {double(c8[0]), double(c8[1]), double(c8[2])};
+        }
+        const double diffuse = std::max(0.0, n.dot(light));
+        const double specular = std::pow(std::max(0.0, n.dot((light + view_dir).normalized())), 40.0);
+        const double shade = 0.35 + 0.65 * diffuse;
+        auto& out = colour_[static_cast<size_t>(y * w_ + x)];
+        for (int k = 0; k < 3; ++k) {
+          out[static_cast<size_t>(k)] = static_cast<float>(std::min(255.0, base[static_cast<size_t>(k)] * shade + 60.0 * specular));
+        }
+      }
+    }
+  }
+}
+
+void Renderer::fill_rect(double x0, double y0, double x1, double y1, const std::array<uint8_t, 3>& c) {
+  for (int y = std::max(0, static_cast<int>(y0)); y < std::min(h_, static_cast<int>(y1)); ++y) {
+    for (int x = std::max(0, static_cast<int>(x0)); x < std::min(w_, static_cast<int>(x1)); ++x) {
+      colour_[static_cast<size_t>(y * w_ + x)] = {float(c[0]), float(c[1]), float(c[2])};
+    }
+  }
+}
+
+void Renderer::text(int x, int y, const std::string& s, const std::array<uint8_t, 3>& colour, int scale) {
+  std::vector<char> buffer(s.size() * 300 + 1000);
+  std::string copy = s;
+  const int quads = stb_easy_font_print(0, 0, copy.data(), nullptr, buffer.data(), static_cast<int>(buffer.size()));
+  const double k = scale * ss_;
+  for (int q = 0; q < quads; ++q) {
+    const auto* v = reinterpret_cast<const float*>(buffer.data() + static_cast<size_t>(q) * 4 * 16);
+    const double qx0 = v[0], qy0 = v[1], qx1 = v[2 * 4], qy1 = v[2 * 4 + 1];
+    fill_rect(x * ss_ + qx0 * k, y * ss_ + qy0 * k, x * ss_ + qx1 * k, y * ss_ + qy1 * k, colour);
+  }
+}
+
+void Renderer::colour_bar(const std::string& title, double min, double max, const std::string& unit) {
+  const int width = w_ / ss_, height = h_ / ss_;
+  const int bar_x = width - 70, bar_top = height / 6, bar_bottom = height - height / 6;
+  for (int y = bar_top; y < bar_bottom; ++y) {
+    const auto c = viridis(1.0 - static_cast<double>(y - bar_top) / (bar_bottom - bar_top));
+    fill_rect(bar_x * ss_, y * ss_, (bar_x + 18) * ss_, (y + 1) * ss_, c);
+  }
+  char label[64];
+  std::snprintf(label, sizeof label, "%.3g %s", max, unit.c_str());
+  text(bar_x - 10, bar_top - 18, label, {30, 30, 30}, 1);
+  std::snprintf(label, sizeof label, "%.3g", min);
+  text(bar_x - 10, bar_bottom + 6, label, {30, 30, 30}, 1);
+  text(width - 20 - static_cast<int>(title.size()) * 6, bar_top - 34, title, {30, 30, 30}, 1);
+}
+
+Image Renderer::image() const {
+  Image out(w_ / ss_, h_ / ss_);
+  for (int y = 0; y < out.height; ++y) {
+    for (int x = 0; x < out.width; ++x) {
+      std::array<float, 3> sum = {0, 0, 0};
+      for (int dy = 0; dy < ss_; ++dy) {
+        for (int dx = 0; dx < ss_; ++dx) {
+          const auto& c = colour_[static_cast<size_t>((y * ss_ + dy) * w_ + x * ss_ + dx)];
+          for (int k = 0; k < 3; ++k) sum[static_cast<size_t>(k)] += c[static_cast<size_t>(k)];
+        }
+      }
+      out.set(x, y, {static_cast<uint8_t>(sum[0] / (ss_ * ss_) + 0.5f), static_cast<uint8_t>(sum[1] / (ss_ * ss_) + 0.5f),
+                     static_cast<uint8_t>(sum[2] / (ss_ * ss_) + 0.5f)});
+    }
+  }
+  return out;
+}
+
+}  // namespace softshell::demo
