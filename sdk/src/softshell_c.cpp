@@ -307,6 +307,10 @@ ss_session* wrap_session(std::shared_ptr<Session> session) {
   return handle;
 }
 
+std::shared_ptr<Session> session_of(const ss_session* handle) {
+  return live(handle, kSessionTag, "session").session;
+}
+
 }  // namespace softshell::c_api
 
 using softshell::c_api::guard;

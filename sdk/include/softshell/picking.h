@@ -179,7 +179,9 @@ class RayRefiner {
 
 /// Options of `Picker::pick`.
 struct PickOptions {
-  bool refine = true;            ///< run the Newton refinement (otherwise `point` = `estimate`)
+  /// Run the Newton refinement. Off: `point` = `estimate`, evaluated on the limit surface, and
+  /// `status` is kConverged only if that point happens to lie on the ray.
+  bool refine = true;
   bool cull_back_faces = false;  ///< ignore triangles seen from behind
   RefineOptions refinement;
 };

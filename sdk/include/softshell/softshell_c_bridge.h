@@ -16,6 +16,10 @@ namespace softshell::c_api {
 /// and by the last operation still running on it). Throws `Exception(kInvalidArgument)` for null.
 SS_API ss_session* wrap_session(std::shared_ptr<Session> session);
 
+/// The C++ session behind a live `ss_session` handle. Throws `Exception(kInvalidArgument)` for
+/// NULL or a handle that is not a live session.
+SS_API std::shared_ptr<Session> session_of(const ss_session* handle);
+
 /// Runs `fn` and returns SS_OK, or the status of what it threw (`softshell::Exception` -> its code,
 /// std::bad_alloc -> SS_RESOURCE_EXHAUSTED, anything else -> SS_INTERNAL) with the message stored
 /// for `ss_last_error_message()`, prefixed by `function`. Never throws.

@@ -41,6 +41,10 @@ SS_EMBEDDED_API void ss_embedded_options_default(ss_embedded_options* out);
  *  with `ss_session_destroy`; the server stops when the session and its operations are gone. */
 SS_EMBEDDED_API ss_status ss_session_create_embedded(const ss_embedded_options* options, ss_session** out_session);
 
+/** The port of the session's HTTP listener, 0 if it has none. SS_INVALID_ARGUMENT for a session
+ *  that is not an embedded one. */
+SS_EMBEDDED_API ss_status ss_session_embedded_port(const ss_session* session, int32_t* out_port);
+
 #ifdef __cplusplus
 }  /* extern "C" */
 #endif
