@@ -7,6 +7,9 @@
 ///
 /// Displacements are always relative to the rest shape (the geometry as uploaded): the server's
 /// linear solve starts from it. Units: the mesh's length unit; forces in N when SI.
+///
+/// Thread-safety: the free functions only read their arguments and may run concurrently (not while
+/// the tessellation they read is being updated); `Grab` is an immutable value.
 
 #include <cstdint>
 #include <optional>
