@@ -74,9 +74,10 @@ ScordelisLo make_scordelis_lo(int nt, int nl) {
       b[i] -= w * c[i - 1];
       d[i] -= w * d[i - 1];
     }
-    std::vector<double> p(x.size());
-    p.back() = d.back() / b.back();
-    for (size_t i = x.size() - 1; i-- > 0;) p[i] = (d[i] - c[i] * p[i + 1]) / b[i];
+    const size_t n = x.size();
+    std::vector<double> p(n);
+    p[n - 1] = d[n - 1] / b[n - 1];
+    for (size_t i = n - 1; i-- > 0;) p[i] = (d[i] - c[i] * p[i + 1]) / b[i];
     return p;
   };
   const std::vector<double> px = fit([](double t) { return ScordelisLo::kRadius * std::sin(t); });

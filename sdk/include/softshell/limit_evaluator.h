@@ -60,9 +60,11 @@ struct LimitSample {
 class LimitEvaluator {
  public:
   struct Options {
-    /// Bfr refinement levels around extraordinary vertices of smooth faces (OpenSubdiv default 2;
-    /// higher is closer to the exact limit and costs more per face). Range 1..10.
-    int approx_level_smooth = 2;
+    /// Bfr refinement levels around extraordinary vertices of smooth faces (OpenSubdiv's default
+    /// is 2; softshell uses 3, which brings the shell's compliance within ~2e-5 of the exact limit
+    /// surface's, see README "Quadrature"). Clients and server must use the same value so that a
+    /// (face, u, v) names the same point on both. Range 1..10.
+    int approx_level_smooth = 3;
     /// Bfr refinement levels around sharp features (OpenSubdiv default 6). Range 1..10.
     int approx_level_sharp = 6;
   };

@@ -226,13 +226,20 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
       quad.ev_refinement_levels > 8) {
     fail(ErrorCode::kInvalidArgument, "quadrature: gauss_points must be 1..10 and ev_refinement_levels 0..8");
   }
-  LimitEvaluator evaluator = LimitEvaluator::create(mesh, options.evaluator).value();
+  // Sharp creases and corners make the limit surface C0 (or nearly so) along them: a
+  // Kirchhoff-Love shell needs C1, and across a kink it would act as a hinge (near-zero bending
+  // stiffness, ill-conditioned K). The simulation therefore uses the smooth surface of the same
+  // control mesh; see README "Limits of the model".
+  ControlMesh smooth = mesh;
+  smooth.creases().clear();
+  smooth.corners().clear();
+  LimitEvaluator evaluator = LimitEvaluator::create(smooth, options.evaluator).value();
   std::shared_ptr<ShellModel> model(new ShellModel(evaluator, material, options));
   model->options_.progress = nullptr;  // do not keep the caller's callback (and what it captures)
   model->options_.cancel = nullptr;
 
   // The (face, sub-face) domains to integrate; ghost faces have no surface.
-  const internal::IrregularCorners irregular(mesh);
+  const internal::IrregularCorners irregular(smooth);
   std::vector<FaceWork> work;
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     if (!evaluator.has_limit_surface(f)) continue;

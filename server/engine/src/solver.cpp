@@ -25,6 +25,13 @@ double ms_since(Clock::time_point t) { return std::chrono::duration<double, std:
 // factorizing again. Each costs one more right-hand side in the triangular solves.
 constexpr size_t kMaxExtraRows = 96;
 
+std::string format_number(double x) {
+  std::ostringstream s;
+  s.precision(3);
+  s << x;
+  return s.str();
+}
+
 std::string axis_name(int a) { return std::string(1, "xyz"[a]); }
 
 std::string format_vec(Vec3 v) {
@@ -358,8 +365,9 @@ void check_solution(const Problem& p, const Eigen::VectorXd& u, double length) {
     for (const auto& [dof, coef] : row.terms) lhs += coef * u[dof];
     if (std::abs(lhs - row.rhs) > 1e-7 * row.scale * scale + 1e-12 * std::abs(row.rhs)) {
       fail(ErrorCode::kUnprocessable, "the constraints contradict each other: " + row.source +
+                                          " (displacement scale " + format_number(scale) + ")" +
                                           " cannot be met together with the others (residual " +
-                                          std::to_string(lhs - row.rhs) + ")");
+                                          format_number(lhs - row.rhs) + ")");
     }
   }
 }
@@ -484,7 +492,13 @@ Solution Solver::solve_on_cached_factor(const DeformationRequest& request) const
     const Eigen::MatrixXd z = factor->solve(rhs);
     const auto h = rhs.rightCols(nq + nr);
     const auto z_h = z.rightCols(nq + nr);
-    const SmallSystem small(m - h.transpose() * z_h);
+    Eigen::MatrixXd schur = m - h.transpose() * z_h;
+    // The pins carry exactly the zero-energy motions the factor's fixed set leaves free, so the
+    // Schur complement of K onto them vanishes identically (K_QQ - K_Qa K_aa^-1 K_aQ = 0); what the
+    // subtraction leaves is cancellation noise of size eps |K|, which would swamp the constraint
+    // block after scaling.
+    schur.topLeftCorner(nq, nq).setZero();
+    const SmallSystem small(schur);
     Eigen::VectorXd y = small.solve(b_small - h.transpose() * z.col(0));
     Eigen::VectorXd u_a = z.col(0) - z_h * y;
 

@@ -55,6 +55,8 @@ struct QuadraturePoint {
 class ShellModel {
  public:
   /// Validates mesh and material, evaluates the basis at every quadrature point and assembles K.
+  /// Crease and corner tags are not used: the shell is the smooth limit surface of the control
+  /// mesh (a kink would act as a hinge in a Kirchhoff-Love shell).
   static Result<std::shared_ptr<const ShellModel>> build(const ControlMesh& mesh, const Material& material,
                                                          const PrecomputeOptions& options = {});
 
