@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <future>
 #include <limits>
@@ -28,6 +29,18 @@
 
 using softshell::ErrorCode;
 using softshell::Vec3;
+
+// The layouts that C, C# (P/Invoke, sequential layout) and Unreal rely on. Changing one is an ABI
+// break: bump SS_ABI_VERSION.
+static_assert(SS_ABI_VERSION == 1u);
+static_assert(sizeof(ss_vec3) == 24 && sizeof(ss_quat) == 32 && sizeof(ss_pose) == 56);
+static_assert(sizeof(ss_surface_point) == 24 && offsetof(ss_surface_point, u) == 8);
+static_assert(sizeof(ss_material) == 32 && sizeof(ss_geom_id) == 16);
+static_assert(sizeof(ss_ray) == 64 && offsetof(ss_ray, t_min) == 48);
+static_assert(sizeof(ss_limit_sample) == 96);
+static_assert(sizeof(ss_pick) == 184 && offsetof(ss_pick, estimate) == 8 && offsetof(ss_pick, t) == 152 &&
+              offsetof(ss_pick, iterations) == 176);
+static_assert(sizeof(ss_grab_options) == 8 && sizeof(ss_floor_options) == 16);
 
 // ------------------------------------------------------------------------------------------------
 // Handles: a tag checked on every call, then the C++ object.
