@@ -656,13 +656,13 @@ Result<RayRefinement> RayRefiner::refine(const Ray& ray, const SurfacePoint& sta
 // ------------------------------------------------------------------------------------------------
 // Picker
 
-Picker::Picker(const Tessellation& tessellation, TriangleBvh bvh)
-    : tessellation_(&tessellation), bvh_(std::move(bvh)), refiner_(tessellation.evaluator()) {}
+Picker::Picker(const Tessellation& tessellation, TriangleBvh bvh, const TriangleBvh::Options& options)
+    : tessellation_(&tessellation), options_(options), bvh_(std::move(bvh)), refiner_(tessellation.evaluator()) {}
 
 Result<Picker> Picker::create(const Tessellation& tessellation, const TriangleBvh::Options& options) {
   return capture([&]() -> Picker {
     TriangleBvh bvh = TriangleBvh::build(tessellation.vertices(), tessellation.triangles(), options).value();
-    return Picker(tessellation, std::move(bvh));
+    return Picker(tessellation, std::move(bvh), options);
   });
 }
 
@@ -698,5 +698,12 @@ Result<std::optional<Pick>> Picker::pick(const Ray& ray, const PickOptions& opti
 }
 
 Result<void> Picker::refit() { return bvh_.refit(tessellation_->vertices()); }
+
+Result<void> Picker::rebuild() {
+  auto bvh = TriangleBvh::build(tessellation_->vertices(), tessellation_->triangles(), options_);
+  if (!bvh) return bvh.error();
+  bvh_ = std::move(bvh).value();
+  return {};
+}
 
 }  // namespace softshell

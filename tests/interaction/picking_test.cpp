@@ -406,6 +406,18 @@ TEST(Picking, RefitFollowsTheDeformedSurface) {
   }
   EXPECT_GT(hits, 150);
   EXPECT_GE(picker.bvh().stats().refit_ms, 0.0);
+
+  // A rebuilt tree answers the same.
+  auto rebuilt = Picker::create(t).value();
+  ASSERT_TRUE(rebuilt.rebuild().ok());
+  for (const Ray& ray : aimed_rays(t2, 50, 10)) {
+    auto a = picker.pick(ray).value();
+    auto b = rebuilt.pick(ray).value();
+    ASSERT_EQ(a.has_value(), b.has_value());
+    if (a) {
+      EXPECT_EQ(a->hit.triangle, b->hit.triangle);
+    }
+  }
 }
 
 TEST(Picking, UnrefinedPickReportsTheEstimate) {

@@ -228,14 +228,18 @@ class Picker {
   /// Follows the tessellation after `Tessellation::update`. kInvalidArgument if its vertex count
   /// changed or a vertex is not finite.
   Result<void> refit();
+  /// Rebuilds the BVH over the tessellation's current vertices: slower than `refit` (tens of ms
+  /// for 100k triangles) but keeps queries fast after large deformations.
+  Result<void> rebuild();
 
   const Tessellation& tessellation() const { return *tessellation_; }
   const TriangleBvh& bvh() const { return bvh_; }
   const RayRefiner& refiner() const { return refiner_; }
 
  private:
-  Picker(const Tessellation& tessellation, TriangleBvh bvh);
+  Picker(const Tessellation& tessellation, TriangleBvh bvh, const TriangleBvh::Options& options);
   const Tessellation* tessellation_;
+  TriangleBvh::Options options_;
   TriangleBvh bvh_;
   RayRefiner refiner_;
 };
