@@ -83,6 +83,10 @@ class Session {
   /// Every geometry the server holds.
   virtual Result<std::vector<GeometryInfo>> geometries() = 0;
 
+  /// Status, precomputation progress and result count of one geometry
+  /// (`GET /geometries/{id}/status`, an extension).
+  virtual Result<GeometryInfo> geometry_info(const GeomId& id) = 0;
+
   /// The control mesh and material of a geometry, as uploaded.
   virtual Result<Geometry> geometry(const GeomId& id) = 0;
 
@@ -99,6 +103,10 @@ class Session {
 
   /// One stored result.
   virtual Result<DeformationResult> result(const GeomId& id, uint32_t res_id) = 0;
+
+  /// The request that produced a stored result, as the server received it (for undo, replay
+  /// and sharing constraints; `GET /geometries/{id}/results/{res_id}/request`, an extension).
+  virtual Result<DeformationRequest> result_request(const GeomId& id, uint32_t res_id) = 0;
 
   /// The newest result if it is newer than `have`; otherwise waits up to `wait` for one and
   /// returns std::nullopt if none arrived (HTTP 204).

@@ -1,0 +1,67 @@
+#pragma once
+/// \file
+/// \brief `EmbeddedSession`: a `Session` that runs the softshell service inside the application
+/// (no sockets, no serialization), and can open the HTTP listener so that other devices join the
+/// same geometries and results.
+
+#include <chrono>
+#include <memory>
+#include <string>
+
+#include "softshell/http/server.h"
+#include "softshell/service/service.h"
+#include "softshell/session.h"
+
+namespace softshell {
+
+/// The service in-process.
+///
+/// Results are the service's own values (double precision), so a script gives the same numbers
+/// through an `EmbeddedSession` as through a `RemoteSession` in JSON format (and the same up to
+/// f32 rounding of inputs and outputs in binary format).
+///
+/// Thread-safety: every member function may be called from several threads at once.
+class EmbeddedSession final : public Session {
+ public:
+  /// A session with its own service.
+  explicit EmbeddedSession(service::ServiceOptions options = {});
+  /// A session on a shared service (several sessions, or a session and other code).
+  explicit EmbeddedSession(std::shared_ptr<service::Service> service);
+  /// Stops the listener. The service shuts down when its last owner lets it go.
+  ~EmbeddedSession() override;
+  EmbeddedSession(const EmbeddedSession&) = delete;
+  EmbeddedSession& operator=(const EmbeddedSession&) = delete;
+
+  /// Opens the HTTP API (PROTOCOL.md) on `host:port` (port 0 = any free port) so that other
+  /// clients share this service. Returns the bound port. kUnavailable if it is open already or
+  /// the address cannot be bound.
+  Result<int> listen(const std::string& host = "0.0.0.0", int port = 0, http::ServerOptions options = {});
+  /// Closes the listener (releases its long polls); the session keeps working. Idempotent.
+  void stop_listening();
+  /// The listening port, or 0.
+  int port() const;
+
+  /// The service behind the session.
+  const std::shared_ptr<service::Service>& service() const { return service_; }
+
+  Result<UploadResult> upload(const ControlMesh& mesh, const Material& material,
+                              std::string_view name_space = "") override;
+  Result<std::vector<GeometryInfo>> geometries() override;
+  Result<GeometryInfo> geometry_info(const GeomId& id) override;
+  Result<Geometry> geometry(const GeomId& id) override;
+  Result<DeformationResult> deform(const GeomId& id, const DeformationRequest& request) override;
+  std::future<Result<DeformationResult>> deform_async(const GeomId& id, const DeformationRequest& request) override;
+  Result<std::vector<uint32_t>> result_ids(const GeomId& id) override;
+  Result<DeformationResult> result(const GeomId& id, uint32_t res_id) override;
+  Result<DeformationRequest> result_request(const GeomId& id, uint32_t res_id) override;
+  Result<std::optional<DeformationResult>> latest_result(const GeomId& id, uint32_t have,
+                                                         std::chrono::milliseconds wait) override;
+  Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) override;
+
+ private:
+  std::shared_ptr<service::Service> service_;
+  mutable std::mutex listener_mu_;
+  std::unique_ptr<http::HttpServer> listener_;
+};
+
+}  // namespace softshell

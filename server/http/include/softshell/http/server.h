@@ -1,0 +1,99 @@
+#pragma once
+/// \file
+/// \brief `HttpServer`: the HTTP API of PROTOCOL.md over a `service::Service` (cpp-httplib).
+///
+/// Handlers are thin: parse the request, call the service, serialize the answer. Every error is
+/// the JSON error of PROTOCOL.md with its status; a client's mistake is never a 5xx.
+///
+/// Threads: every open connection is served by its own I/O thread (cpp-httplib's model), taken
+/// from a pool that grows on demand up to `max_connections`; I/O threads only parse, wait and
+/// write. Solves and precomputations run on the service's fixed pools, so long polls (which hold
+/// an I/O thread while they wait) can never starve a computation, and at most
+/// `max_connections - reserved_connections` connections may long-poll at once, so waiters cannot
+/// starve other requests of I/O threads either.
+
+#include <chrono>
+#include <cstddef>
+#include <memory>
+#include <string>
+
+#include "softshell/result.h"
+#include "softshell/service/log.h"
+#include "softshell/service/service.h"
+
+namespace softshell::http {
+
+/// Configuration of an `HttpServer`.
+struct ServerOptions {
+  /// Largest request body (bytes); larger bodies get 413.
+  size_t max_body_bytes = size_t{64} << 20;
+  /// JSON bodies being decoded at once may total at most this many bytes (a JSON body takes up
+  /// to ~20x its size while parsed); beyond it a request gets 507 and may retry. 0 = 4 x
+  /// max_body_bytes.
+  size_t max_json_decode_bytes = 0;
+  /// Open connections served at once (one I/O thread each); more wait to be accepted.
+  int max_connections = 1024;
+  /// I/O threads kept free of long polls: at most max_connections - reserved_connections
+  /// `latest_result` requests wait at once; more get 503 with `Retry-After: 1`.
+  int reserved_connections = 32;
+  /// An idle keep-alive connection is closed after this long (also bounds how long `stop` waits
+  /// for idle connections).
+  std::chrono::seconds keep_alive_timeout{5};
+  /// Time allowed to receive a request and to send a response.
+  std::chrono::seconds io_timeout{30};
+  /// `latest_result`'s `wait` default and upper bound (PROTOCOL.md: 25 and 60 seconds).
+  double default_wait_seconds = 25.0;
+  double max_wait_seconds = 60.0;
+  /// Where request lines (`info`: method, path, status, microseconds) and handler failures
+  /// (`error`) go.
+  service::Logger logger;
+};
+
+/// Request counters of one endpoint (for tests and /metrics).
+struct EndpointStats {
+  std::string endpoint;  ///< e.g. "POST /geometries/{id}/results"
+  uint64_t requests = 0;
+  uint64_t client_errors = 0;  ///< 4xx
+  uint64_t server_errors = 0;  ///< 5xx
+};
+
+/// The HTTP front end of a service.
+///
+/// Thread-safety: `start`, `stop` and the accessors may be called from any thread; `stop` is
+/// idempotent and is also called by the destructor.
+class HttpServer {
+ public:
+  HttpServer(std::shared_ptr<service::Service> service, ServerOptions options = {});
+  ~HttpServer();
+  HttpServer(const HttpServer&) = delete;
+  HttpServer& operator=(const HttpServer&) = delete;
+
+  /// Binds `host:port` (port 0 = any free port) and serves on a background thread. Returns the
+  /// bound port; kUnavailable if the address cannot be bound or the server already started.
+  Result<int> start(const std::string& host, int port);
+
+  /// Stops accepting, answers waiting long polls and deformation requests with 503, lets
+  /// running requests finish and joins every thread. The service keeps running.
+  void stop();
+
+  /// The bound port, or 0 before `start`.
+  int port() const;
+  bool running() const;
+
+  /// The text `GET /metrics` answers (Prometheus exposition format).
+  std::string metrics_text() const;
+  /// Counters per endpoint.
+  std::vector<EndpointStats> endpoint_stats() const;
+  /// Connections (I/O threads) busy right now, and long polls waiting right now.
+  int busy_connections() const;
+  int waiting_long_polls() const;
+
+  const ServerOptions& options() const;
+  service::Service& service() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace softshell::http

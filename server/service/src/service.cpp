@@ -1,0 +1,603 @@
+#include "softshell/service/service.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <condition_variable>
+#include <cstring>
+#include <mutex>
+#include <optional>
+#include <shared_mutex>
+#include <sstream>
+#include <thread>
+#include <unordered_map>
+
+#include "softshell/content_id.h"
+#include "softshell/mesh_validation.h"
+#include "softshell/wire.h"
+#include "task_pool.h"
+
+namespace softshell::service {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct GeomIdHash {
+  size_t operator()(const GeomId& id) const noexcept {
+    size_t h = 0;
+    std::memcpy(&h, id.bytes.data(), sizeof h);  // the id is a cryptographic hash already
+    return h;
+  }
+};
+
+std::string megabytes(size_t bytes) {
+  std::ostringstream s;
+  s.precision(bytes < (size_t{10} << 20) ? 2 : 0);
+  s << std::fixed << static_cast<double>(bytes) / (1024.0 * 1024.0) << " MiB";
+  return s.str();
+}
+
+size_t physical_memory() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+  if (pages <= 0 || page <= 0) return size_t{4} << 30;
+  return static_cast<size_t>(pages) * static_cast<size_t>(page);
+}
+
+int hardware_threads() { return std::max(1, static_cast<int>(std::thread::hardware_concurrency())); }
+
+// The memory budget of everything the service keeps. Reservations are exact byte counts of what
+// is stored (meshes, results) or estimates replaced by the real size (precomputed models).
+class MemoryBudget {
+ public:
+  explicit MemoryBudget(size_t budget) : budget_(budget) {}
+  bool try_reserve(size_t bytes) {
+    std::lock_guard lock(mu_);
+    if (bytes > budget_ || used_ > budget_ - bytes) return false;
+    used_ += bytes;
+    return true;
+  }
+  // Replaces a reservation by another size, even beyond the budget (a model that turned out
+  // larger than estimated is kept; later requests are refused instead).
+  void resize(size_t from, size_t to) {
+    std::lock_guard lock(mu_);
+    used_ = used_ - std::min(used_, from) + to;
+  }
+  size_t used() const {
+    std::lock_guard lock(mu_);
+    return used_;
+  }
+  size_t budget() const { return budget_; }
+
+ private:
+  mutable std::mutex mu_;
+  size_t used_ = 0;
+  const size_t budget_;
+};
+
+size_t mesh_bytes(const ControlMesh& mesh) {
+  return sizeof(Geometry) + mesh.positions().size() * sizeof(Vec3) +
+         (mesh.face_indices().size() + mesh.face_offsets().size()) * sizeof(int32_t) +
+         mesh.creases().size() * sizeof(Crease) + mesh.corners().size() * sizeof(Corner);
+}
+
+// A generous estimate of a precomputed model before it exists (replaced by
+// ShellModel::memory_bytes() once built): the stiffness matrix couples each control point with
+// about 49 others (9 values + indices per pair) and every (sub-)face caches the basis at its
+// quadrature points.
+size_t model_estimate(const ControlMesh& mesh) {
+  size_t subfaces = 0;
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) subfaces += mesh.face_size(f) == 4 ? 1 : static_cast<size_t>(mesh.face_size(f));
+  return mesh.positions().size() * 49 * 9 * 12 + subfaces * 16 * 1024;
+}
+
+size_t request_bytes(const DeformationRequest& r) {
+  size_t bytes = sizeof(DeformationRequest) + r.vertex_constraints.size() * sizeof(VertexConstraint) +
+                 r.forces.size() * sizeof(PointForce) + r.limit_constraints.size() * sizeof(LimitConstraint) +
+                 r.surface_forces.size() * sizeof(SurfaceForce);
+  for (const auto& c : r.lagrange_constraints) {
+    bytes += sizeof(LagrangeConstraint) + c.indices.size() * sizeof(int32_t) + c.coefficients.size() * sizeof(Vec3);
+  }
+  return bytes;
+}
+
+Result<void> check_namespace(std::string_view ns) {
+  auto bad = [](const std::string& m) -> Result<void> { return Error{ErrorCode::kInvalidArgument, m}; };
+  if (ns.size() > 256) return bad("a namespace is at most 256 bytes long, got " + std::to_string(ns.size()));
+  // UTF-8 without control characters.
+  for (size_t i = 0; i < ns.size();) {
+    const auto c = static_cast<unsigned char>(ns[i]);
+    if (c < 0x20 || c == 0x7f) return bad("a namespace must not contain control characters");
+    size_t len = c < 0x80 ? 1 : (c >> 5) == 0x6 ? 2 : (c >> 4) == 0xe ? 3 : (c >> 3) == 0x1e ? 4 : 0;
+    if (len == 0 || i + len > ns.size()) return bad("a namespace must be valid UTF-8");
+    for (size_t k = 1; k < len; ++k) {
+      if ((static_cast<unsigned char>(ns[i + k]) >> 6) != 0x2) return bad("a namespace must be valid UTF-8");
+    }
+    i += len;
+  }
+  return {};
+}
+
+// Runs `fn` (which returns a Result) and turns anything it throws into an error.
+template <class Fn>
+auto guarded(Fn&& fn) -> decltype(fn()) {
+  try {
+    return fn();
+  } catch (const Exception& e) {
+    return e.error();
+  } catch (const std::bad_alloc&) {
+    return Error{ErrorCode::kResourceExhausted, "out of memory"};
+  } catch (const std::exception& e) {
+    return Error{ErrorCode::kInternal, std::string("internal error: ") + e.what()};
+  }
+}
+
+Error not_found(const GeomId& id) {
+  return Error{ErrorCode::kNotFound, "no geometry with id " + id.hex() + " (upload it first with POST /geometries)"};
+}
+
+Error shutdown_error() { return Error{ErrorCode::kUnavailable, "the server is shutting down"}; }
+
+using Pending = std::pair<DeformationRequest, Service::DeformCallback>;
+
+// One geometry and everything the service keeps for it.
+struct Entry {
+  GeomId id;
+  std::shared_ptr<const Geometry> geometry;
+
+  mutable std::mutex mu;  // guards everything below but `progress` and the evaluator
+  mutable std::condition_variable cv;  // notified when a result is stored or the status changes
+  GeometryStatus status = GeometryStatus::kPrecomputing;
+  std::string error;
+  size_t reserved_bytes = 0;  // mesh + model (estimate until built)
+  std::shared_ptr<const engine::ShellModel> model;
+  std::shared_ptr<const engine::Solver> solver;
+  std::vector<ResultPtr> results;  // results[k] has res_id k + 1
+  std::vector<Pending> pending;    // requests waiting for the precomputation
+
+  std::atomic<double> progress{0.0};
+
+  mutable std::mutex evaluator_mu;  // guards the lazily created evaluator
+  mutable std::optional<LimitEvaluator> evaluator;
+  mutable std::optional<Error> evaluator_error;
+
+  GeometryInfo info_locked() const {
+    GeometryInfo info;
+    info.id = id;
+    info.name_space = geometry->name_space;
+    info.vertices = geometry->mesh.num_vertices();
+    info.faces = geometry->mesh.num_faces();
+    info.status = status;
+    info.results = static_cast<uint32_t>(results.size());
+    info.progress = status == GeometryStatus::kReady ? 1.0 : progress.load(std::memory_order_relaxed);
+    info.error = error;
+    return info;
+  }
+};
+
+}  // namespace
+
+struct Service::Impl {
+  explicit Impl(const ServiceOptions& o)
+      : options(o),
+        cache(std::make_shared<engine::FactorCache>(o.cache_bytes)),
+        budget(o.store_bytes ? o.store_bytes : physical_memory() / 2),
+        precompute_pool(std::max(1, o.precompute_jobs)),
+        solve_pool(o.solve_threads > 0 ? o.solve_threads : hardware_threads()) {}
+
+  std::shared_ptr<Entry> find(const GeomId& id) const {
+    std::shared_lock lock(registry_mu);
+    auto it = by_id.find(id);
+    return it == by_id.end() ? nullptr : it->second;
+  }
+
+  std::vector<std::shared_ptr<Entry>> all() const {
+    std::shared_lock lock(registry_mu);
+    return in_order;
+  }
+
+  // The limit evaluator of a geometry: the model's once built, before that one made on demand.
+  Result<LimitEvaluator> evaluator(const Entry& e) const {
+    {
+      std::lock_guard lock(e.mu);
+      if (e.model) return e.model->evaluator();
+    }
+    std::lock_guard lock(e.evaluator_mu);
+    if (!e.evaluator && !e.evaluator_error) {
+      // The same surface the model will have: the engine simulates the smooth limit surface of
+      // the control mesh, without crease and corner tags (ShellModel::build).
+      ControlMesh smooth = e.geometry->mesh;
+      smooth.creases().clear();
+      smooth.corners().clear();
+      auto created = guarded([&] { return LimitEvaluator::create(smooth, options.precompute.evaluator); });
+      if (created) e.evaluator = std::move(*created);
+      else e.evaluator_error = created.error();
+    }
+    if (e.evaluator_error) return *e.evaluator_error;
+    return *e.evaluator;
+  }
+
+  void start_precompute(const std::shared_ptr<Entry>& e) {
+    precompute_pool.submit([this, e] {
+      if (stopping.load()) {
+        finish_precompute(e, shutdown_error(), 0.0);
+        return;
+      }
+      const auto& g = *e->geometry;
+      options.logger.info("precomputing geometry " + e->id.hex() + " (" + std::to_string(g.mesh.num_vertices()) +
+                          " control points, " + std::to_string(g.mesh.num_faces()) + " faces)");
+      engine::PrecomputeOptions opts = options.precompute;
+      opts.threads = options.precompute_threads;
+      opts.progress = [e](double f) { e->progress.store(std::clamp(f, 0.0, 1.0), std::memory_order_relaxed); };
+      opts.cancel = &stopping;
+      precomputing_now.fetch_add(1);
+      const auto start = Clock::now();
+      auto model = guarded([&] { return engine::ShellModel::build(g.mesh, g.material, opts); });
+      const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+      precomputing_now.fetch_sub(1);
+      if (model && !*model) model = Error{ErrorCode::kInternal, "the precomputation returned no model"};
+      finish_precompute(e, std::move(model), seconds);
+    });
+  }
+
+  void finish_precompute(const std::shared_ptr<Entry>& e, Result<std::shared_ptr<const engine::ShellModel>> model,
+                         double seconds) {
+    std::vector<Pending> pending;
+    std::shared_ptr<const engine::Solver> solver;
+    std::string error;
+    {
+      std::lock_guard lock(e->mu);
+      if (model) {
+        e->model = std::move(*model);
+        solver = std::make_shared<const engine::Solver>(e->model, cache);
+        e->solver = solver;
+        precompute_hist.observe(seconds);  // before the status is visible: stats never lag it
+        e->status = GeometryStatus::kReady;
+        const size_t actual = mesh_bytes(e->geometry->mesh) + e->model->memory_bytes();
+        budget.resize(e->reserved_bytes, actual);
+        e->reserved_bytes = actual;
+      } else {
+        e->status = GeometryStatus::kFailed;
+        e->error = model.error().message;
+        const size_t kept = mesh_bytes(e->geometry->mesh);
+        budget.resize(e->reserved_bytes, kept);
+        e->reserved_bytes = kept;
+        error = "the precomputation of geometry " + e->id.hex() + " failed: " + e->error;
+      }
+      pending.swap(e->pending);
+    }
+    e->cv.notify_all();
+    if (solver) {
+      options.logger.info("geometry " + e->id.hex() + " is ready (precomputed in " + std::to_string(seconds) + " s)");
+      for (auto& [request, done] : pending) submit_solve(e, solver, std::move(request), std::move(done));
+    } else {
+      const bool shutdown = model.error().code == ErrorCode::kUnavailable || model.error().code == ErrorCode::kCancelled;
+      if (!shutdown) options.logger.warning(error);
+      for (auto& [request, done] : pending) {
+        done(shutdown ? shutdown_error() : Error{ErrorCode::kUnprocessable, error});
+      }
+    }
+  }
+
+  void submit_solve(const std::shared_ptr<Entry>& e, std::shared_ptr<const engine::Solver> solver,
+                    DeformationRequest request, DeformCallback done) {
+    solve_pool.submit([this, e, solver = std::move(solver), request = std::move(request),
+                       done = std::move(done)]() mutable {
+      if (stopping.load()) {
+        done(shutdown_error());
+        return;
+      }
+      const auto start = Clock::now();
+      auto solution = guarded([&] { return solver->solve(request); });
+      if (!solution) {
+        solves_failed.fetch_add(1);
+        Error err = solution.error();
+        if (err.code == ErrorCode::kCancelled) err.code = ErrorCode::kUnavailable;
+        if (err.code == ErrorCode::kInternal) options.logger.error("solve failed: " + err.message);
+        done(std::move(err));
+        return;
+      }
+      const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+      auto stored = std::make_shared<StoredResult>();
+      stored->positions = solution->positions(e->geometry->mesh);
+      for (const Vec3& p : stored->positions) {
+        if (!p.allFinite()) {
+          solves_failed.fetch_add(1);
+          done(Error{ErrorCode::kUnprocessable,
+                     "the solve produced non-finite positions: the forces and constraints do not determine the "
+                     "deformation"});
+          return;
+        }
+      }
+      stored->stats = solution->stats;
+      stored->request = std::move(request);
+      const size_t bytes = sizeof(StoredResult) + stored->positions.size() * sizeof(Vec3) + request_bytes(stored->request);
+      bool fits = false;
+      {
+        // The id is assigned here, under the geometry's lock, at the moment the result is
+        // stored: ids follow the storage order and none is skipped or reused.
+        std::lock_guard lock(e->mu);
+        fits = budget.try_reserve(bytes);
+        if (fits) {
+          stored->res_id = static_cast<uint32_t>(e->results.size() + 1);
+          stored->stored_at = std::chrono::system_clock::now();
+          // Counters first, so that whoever sees the result also sees them.
+          total_results.fetch_add(1);
+          solves_ok.fetch_add(1);
+          solve_hist.observe(seconds);
+          e->results.push_back(stored);
+        }
+      }
+      if (!fits) {
+        refused_no_memory.fetch_add(1);
+        done(Error{ErrorCode::kResourceExhausted,
+                   "the server's memory budget (" + megabytes(budget.budget()) + ", " + megabytes(budget.used()) +
+                       " in use) cannot store another result of " + megabytes(bytes) +
+                       "; results are never dropped to make room (restart the server with a larger --store-mb)"});
+        return;
+      }
+      e->cv.notify_all();
+      done(ResultPtr(std::move(stored)));
+    });
+  }
+
+  ServiceOptions options;
+  std::shared_ptr<engine::FactorCache> cache;
+  MemoryBudget budget;
+
+  mutable std::shared_mutex registry_mu;
+  std::unordered_map<GeomId, std::shared_ptr<Entry>, GeomIdHash> by_id;
+  std::vector<std::shared_ptr<Entry>> in_order;
+
+  std::atomic<bool> stopping{false};
+  std::mutex shutdown_mu;
+  std::atomic<int> precomputing_now{0};
+  mutable std::atomic<size_t> waiters{0};
+  std::atomic<uint64_t> total_results{0}, solves_ok{0}, solves_failed{0}, refused_no_memory{0};
+  Histogram solve_hist, precompute_hist;
+
+  // Declared last: destroyed (joined) first, while everything their tasks use still exists.
+  internal::TaskPool precompute_pool;
+  internal::TaskPool solve_pool;
+};
+
+Service::Service(ServiceOptions options) : options_(std::move(options)), impl_(std::make_unique<Impl>(options_)) {}
+
+Service::~Service() { shutdown(); }
+
+bool Service::shutting_down() const { return impl_->stopping.load(); }
+
+void Service::shutdown() {
+  std::lock_guard once(impl_->shutdown_mu);
+  impl_->stopping.store(true);
+  // Answer every request that waits for a precomputation and wake every waiter.
+  for (const auto& e : impl_->all()) {
+    std::vector<Pending> pending;
+    {
+      std::lock_guard lock(e->mu);
+      pending.swap(e->pending);
+    }
+    e->cv.notify_all();
+    for (auto& p : pending) p.second(shutdown_error());
+  }
+  impl_->precompute_pool.shutdown();
+  impl_->solve_pool.shutdown();
+}
+
+Result<UploadResult> Service::upload(ControlMesh mesh, Material material, std::string name_space) {
+  return guarded([&] { return upload_checked(std::move(mesh), material, std::move(name_space)); });
+}
+
+Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& material, std::string name_space) {
+  if (impl_->stopping.load()) return shutdown_error();
+  if (auto ok = check_namespace(name_space); !ok) return ok.error();
+  const GeomId id = geometry_id(mesh, material, name_space);
+  auto existing = [&](const Entry& e) {
+    std::lock_guard lock(e.mu);
+    return UploadResult{id, false, e.status};
+  };
+  if (auto e = impl_->find(id)) return existing(*e);
+
+  // New content: validate before storing anything.
+  if (auto ok = guarded([&] { return validate_mesh(mesh); }); !ok) return ok.error();
+  if (auto ok = material.check(); !ok) return ok.error();
+  const size_t bytes = mesh_bytes(mesh) + model_estimate(mesh);
+
+  auto entry = std::make_shared<Entry>();
+  entry->id = id;
+  entry->geometry = std::make_shared<const Geometry>(Geometry{std::move(mesh), material, std::move(name_space)});
+  entry->reserved_bytes = bytes;
+  {
+    std::unique_lock lock(impl_->registry_mu);
+    if (auto it = impl_->by_id.find(id); it != impl_->by_id.end()) {
+      auto e = it->second;
+      lock.unlock();
+      return existing(*e);
+    }
+    if (!impl_->budget.try_reserve(bytes)) {
+      impl_->refused_no_memory.fetch_add(1);
+      return Error{ErrorCode::kResourceExhausted,
+                   "the server's memory budget (" + megabytes(impl_->budget.budget()) + ", " +
+                       megabytes(impl_->budget.used()) + " in use) cannot hold this geometry (about " +
+                       megabytes(bytes) + " with its precomputation); geometries are never dropped to make room"};
+    }
+    impl_->by_id.emplace(id, entry);
+    impl_->in_order.push_back(entry);
+  }
+  impl_->start_precompute(entry);
+  return UploadResult{id, true, GeometryStatus::kPrecomputing};
+}
+
+std::vector<GeometryInfo> Service::geometries() const {
+  std::vector<GeometryInfo> out;
+  for (const auto& e : impl_->all()) {
+    std::lock_guard lock(e->mu);
+    out.push_back(e->info_locked());
+  }
+  return out;
+}
+
+Result<GeometryInfo> Service::info(const GeomId& id) const {
+  auto e = impl_->find(id);
+  if (!e) return not_found(id);
+  std::lock_guard lock(e->mu);
+  return e->info_locked();
+}
+
+Result<std::shared_ptr<const Geometry>> Service::geometry(const GeomId& id) const {
+  auto e = impl_->find(id);
+  if (!e) return not_found(id);
+  return e->geometry;
+}
+
+Result<GeometryInfo> Service::wait_until_precomputed(const GeomId& id, std::chrono::milliseconds timeout) const {
+  auto e = impl_->find(id);
+  if (!e) return not_found(id);
+  std::unique_lock lock(e->mu);
+  e->cv.wait_for(lock, timeout,
+                 [&] { return e->status != GeometryStatus::kPrecomputing || impl_->stopping.load(); });
+  return e->info_locked();
+}
+
+void Service::deform(const GeomId& id, DeformationRequest request, DeformCallback done) {
+  if (impl_->stopping.load()) return done(shutdown_error());
+  auto e = impl_->find(id);
+  if (!e) return done(not_found(id));
+  if (auto ok = wire::validate_request(request, e->geometry->mesh.num_vertices()); !ok) return done(ok.error());
+
+  // Surface points are checked against the limit surface now, not after the precomputation.
+  if (!request.limit_constraints.empty() || !request.surface_forces.empty()) {
+    auto evaluator = impl_->evaluator(*e);
+    if (!evaluator) return done(evaluator.error());
+    auto check = [&](const SurfacePoint& p, const std::string& name) -> Result<void> {
+      if (auto ok = evaluator->check(p); !ok) return Error{ErrorCode::kInvalidArgument, name + ": " + ok.error().message};
+      return {};
+    };
+    for (size_t k = 0; k < request.limit_constraints.size(); ++k) {
+      if (auto ok = check(request.limit_constraints[k].point, "limit constraint " + std::to_string(k)); !ok) {
+        return done(ok.error());
+      }
+    }
+    for (size_t k = 0; k < request.surface_forces.size(); ++k) {
+      if (auto ok = check(request.surface_forces[k].point, "surface force " + std::to_string(k)); !ok) {
+        return done(ok.error());
+      }
+    }
+  }
+
+  std::unique_lock lock(e->mu);
+  if (impl_->stopping.load()) {
+    lock.unlock();
+    return done(shutdown_error());
+  }
+  switch (e->status) {
+    case GeometryStatus::kFailed: {
+      Error err{ErrorCode::kUnprocessable, "the precomputation of geometry " + id.hex() + " failed: " + e->error};
+      lock.unlock();
+      return done(std::move(err));
+    }
+    case GeometryStatus::kReady: {
+      auto solver = e->solver;
+      lock.unlock();
+      return impl_->submit_solve(e, std::move(solver), std::move(request), std::move(done));
+    }
+    case GeometryStatus::kPrecomputing:
+      e->pending.emplace_back(std::move(request), std::move(done));
+      return;
+  }
+}
+
+std::future<Result<ResultPtr>> Service::deform(const GeomId& id, DeformationRequest request) {
+  auto promise = std::make_shared<std::promise<Result<ResultPtr>>>();
+  auto future = promise->get_future();
+  deform(id, std::move(request), [promise](Result<ResultPtr> r) { promise->set_value(std::move(r)); });
+  return future;
+}
+
+Result<std::vector<uint32_t>> Service::result_ids(const GeomId& id) const {
+  auto e = impl_->find(id);
+  if (!e) return not_found(id);
+  std::lock_guard lock(e->mu);
+  std::vector<uint32_t> ids(e->results.size());
+  for (size_t i = 0; i < ids.size(); ++i) ids[i] = static_cast<uint32_t>(i + 1);
+  return ids;
+}
+
+Result<ResultPtr> Service::result(const GeomId& id, uint32_t res_id) const {
+  auto e = impl_->find(id);
+  if (!e) return not_found(id);
+  std::lock_guard lock(e->mu);
+  if (res_id == 0 || res_id > e->results.size()) {
+    return Error{ErrorCode::kNotFound, "geometry " + id.hex() + " has no result " + std::to_string(res_id) +
+                                           " (it has " + std::to_string(e->results.size()) + ")"};
+  }
+  return e->results[res_id - 1];
+}
+
+Result<ResultPtr> Service::latest_result(const GeomId& id, uint32_t have, std::chrono::milliseconds wait,
+                                         std::stop_token stop) const {
+  auto e = impl_->find(id);
+  if (!e) return not_found(id);
+  auto newer = [&] { return e->results.size() > have; };
+  {
+    std::lock_guard lock(e->mu);
+    if (newer()) return e->results.back();
+  }
+  if (wait.count() <= 0) return ResultPtr();
+  if (impl_->stopping.load() || stop.stop_requested()) return shutdown_error();
+
+  // The stop callback takes the geometry's lock, so it is registered before this thread takes
+  // it (a callback that runs at once, in the constructor, must not deadlock).
+  std::stop_callback wake(stop, [&] {
+    std::lock_guard lock(e->mu);
+    e->cv.notify_all();
+  });
+  std::unique_lock lock(e->mu);
+  impl_->waiters.fetch_add(1);
+  e->cv.wait_for(lock, wait, [&] { return newer() || impl_->stopping.load() || stop.stop_requested(); });
+  impl_->waiters.fetch_sub(1);
+  if (newer()) return e->results.back();
+  if (impl_->stopping.load() || stop.stop_requested()) return shutdown_error();
+  return ResultPtr();
+}
+
+Result<LimitComb> Service::limit_comb(const GeomId& id, const SurfacePoint& point) const {
+  auto e = impl_->find(id);
+  if (!e) return not_found(id);
+  auto evaluator = impl_->evaluator(*e);
+  if (!evaluator) return evaluator.error();
+  if (auto ok = evaluator->check(point); !ok) return ok.error();
+  return guarded([&]() -> Result<LimitComb> {
+    LimitStencil s = evaluator->stencil(point);
+    return LimitComb{point, std::move(s.indices), std::move(s.position), std::move(s.du), std::move(s.dv)};
+  });
+}
+
+ServiceStats Service::stats() const {
+  ServiceStats s;
+  for (const auto& e : impl_->all()) {
+    std::lock_guard lock(e->mu);
+    ++s.geometries;
+    switch (e->status) {
+      case GeometryStatus::kPrecomputing: ++s.geometries_precomputing; break;
+      case GeometryStatus::kReady: ++s.geometries_ready; break;
+      case GeometryStatus::kFailed: ++s.geometries_failed; break;
+    }
+    s.pending_solves += e->pending.size();
+  }
+  s.results = impl_->total_results.load();
+  s.precomputations_running = impl_->precomputing_now.load();
+  s.waiters = impl_->waiters.load();
+  s.store_bytes = impl_->budget.used();
+  s.store_budget = impl_->budget.budget();
+  s.cache = impl_->cache->stats();
+  s.solves_ok = impl_->solves_ok.load();
+  s.solves_failed = impl_->solves_failed.load();
+  s.refused_no_memory = impl_->refused_no_memory.load();
+  s.solve_seconds = impl_->solve_hist.snapshot();
+  s.precompute_seconds = impl_->precompute_hist.snapshot();
+  return s;
+}
+
+}  // namespace softshell::service

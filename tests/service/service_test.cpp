@@ -1,0 +1,479 @@
+// softshell::service without HTTP: ids, precomputation, history, long polls, memory, shutdown.
+#include "softshell/service/service.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <set>
+#include <thread>
+
+#include "server_test_support.h"
+#include "softshell/content_id.h"
+
+namespace softshell::service {
+namespace {
+
+using test::exact_grid;
+using test::exact_material;
+using test::pinned_push;
+using test::seconds_since;
+using Clock = std::chrono::steady_clock;
+using std::chrono::milliseconds;
+
+ServiceOptions small_options() {
+  ServiceOptions o;
+  o.solve_threads = 2;
+  o.precompute_threads = 1;
+  o.store_bytes = size_t{256} << 20;
+  o.cache_bytes = size_t{64} << 20;
+  return o;
+}
+
+GeomId upload_ready(Service& s, const ControlMesh& mesh = exact_grid(), std::string ns = "") {
+  auto up = s.upload(mesh, exact_material(), std::move(ns));
+  EXPECT_TRUE(up) << up.error().message;
+  auto info = s.wait_until_precomputed(up->id, milliseconds(30000));
+  EXPECT_TRUE(info && info->status == GeometryStatus::kReady) << (info ? info->error : info.error().message);
+  return up->id;
+}
+
+// A mesh whose precomputation takes long enough to observe "precomputing" (hundreds of ms).
+ControlMesh slow_mesh() { return test::make_grid(48, 48); }
+
+TEST(ServiceTest, UploadIsIdempotentAndNamespaced) {
+  Service s(small_options());
+  const ControlMesh mesh = exact_grid();
+  auto first = s.upload(mesh, exact_material(), "");
+  ASSERT_TRUE(first) << first.error().message;
+  EXPECT_TRUE(first->created);
+  EXPECT_EQ(first->id, geometry_id(mesh, exact_material(), ""));
+  auto again = s.upload(mesh, exact_material(), "");
+  ASSERT_TRUE(again);
+  EXPECT_FALSE(again->created);
+  EXPECT_EQ(again->id, first->id);
+  auto other = s.upload(mesh, exact_material(), "lab");
+  ASSERT_TRUE(other);
+  EXPECT_TRUE(other->created);
+  EXPECT_NE(other->id, first->id);
+
+  const auto list = s.geometries();
+  ASSERT_EQ(list.size(), 2u);
+  EXPECT_EQ(list[0].id, first->id);
+  EXPECT_EQ(list[1].name_space, "lab");
+  EXPECT_EQ(list[0].vertices, 25);
+  EXPECT_EQ(list[0].faces, 16);
+  auto g = s.geometry(other->id);
+  ASSERT_TRUE(g);
+  EXPECT_EQ((*g)->mesh, mesh);
+  EXPECT_EQ((*g)->name_space, "lab");
+  EXPECT_EQ(s.info(GeomId{}).error().code, ErrorCode::kNotFound);
+}
+
+TEST(ServiceTest, ReuploadDoesNotRestartPrecomputation) {
+  Service s(small_options());
+  const GeomId id = upload_ready(s);
+  const auto before = s.stats();
+  for (int i = 0; i < 5; ++i) ASSERT_FALSE(s.upload(exact_grid(), exact_material())->created);
+  EXPECT_EQ(s.info(id)->status, GeometryStatus::kReady);
+  EXPECT_EQ(s.stats().precompute_seconds.count, before.precompute_seconds.count);
+}
+
+TEST(ServiceTest, UploadValidation) {
+  Service s(small_options());
+  Material bad_e = exact_material();
+  bad_e.youngs_modulus = 0;
+  EXPECT_EQ(s.upload(exact_grid(), bad_e).error().code, ErrorCode::kUnprocessable);
+  Material bad_nu = exact_material();
+  bad_nu.poisson_ratio = 0.5;
+  EXPECT_EQ(s.upload(exact_grid(), bad_nu).error().code, ErrorCode::kUnprocessable);
+  Material bad_t = exact_material();
+  bad_t.thickness = -1;
+  EXPECT_EQ(s.upload(exact_grid(), bad_t).error().code, ErrorCode::kUnprocessable);
+  // Non-manifold: three quads on one edge.
+  ControlMesh fan({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(1, 1, 0), Vec3(0, -1, 0), Vec3(1, -1, 0),
+                   Vec3(0, 0, 1), Vec3(1, 0, 1)},
+                  std::vector<std::vector<int32_t>>{{0, 1, 3, 2}, {1, 0, 4, 5}, {0, 1, 7, 6}});
+  EXPECT_EQ(s.upload(fan, exact_material()).error().code, ErrorCode::kUnprocessable);
+  ControlMesh repeated({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}, std::vector<std::vector<int32_t>>{{0, 1, 1}});
+  EXPECT_EQ(s.upload(repeated, exact_material()).error().code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(s.upload(exact_grid(), exact_material(), std::string(257, 'a')).error().code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(s.upload(exact_grid(), exact_material(), "a\nb").error().code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(s.upload(exact_grid(), exact_material(), "\xff\xfe").error().code, ErrorCode::kInvalidArgument);
+  EXPECT_TRUE(s.upload(exact_grid(), exact_material(), "étude/μ 1"));
+  EXPECT_EQ(s.geometries().size(), 1u);
+}
+
+TEST(ServiceTest, HistoryIdsAreOrderedAndKeepTheirRequests) {
+  Service s(small_options());
+  const GeomId id = upload_ready(s);
+  std::vector<std::vector<Vec3>> seen;
+  for (int k = 1; k <= 4; ++k) {
+    auto r = s.deform(id, pinned_push(k)).get();
+    ASSERT_TRUE(r) << r.error().message;
+    EXPECT_EQ((*r)->res_id, static_cast<uint32_t>(k));
+    seen.push_back((*r)->positions);
+  }
+  EXPECT_EQ(*s.result_ids(id), (std::vector<uint32_t>{1, 2, 3, 4}));
+  for (uint32_t k = 1; k <= 4; ++k) {
+    auto r = s.result(id, k);
+    ASSERT_TRUE(r);
+    EXPECT_EQ((*r)->positions, seen[k - 1]);
+    EXPECT_EQ((*r)->request.forces[0].force.z(), -0.25 * k);
+  }
+  // Linear: the force of request k is k times that of request 1.
+  const auto rest = exact_grid().positions();
+  const int mid = test::grid_index(4, 2, 2);
+  EXPECT_NEAR((seen[3][mid] - rest[mid]).z(), 4 * (seen[0][mid] - rest[mid]).z(), 1e-12);
+  EXPECT_LT((seen[0][mid] - rest[mid]).z(), 0.0);
+  EXPECT_EQ(s.result(id, 0).error().code, ErrorCode::kNotFound);
+  EXPECT_EQ(s.result(id, 5).error().code, ErrorCode::kNotFound);
+  EXPECT_EQ(s.info(id)->results, 4u);
+}
+
+TEST(ServiceTest, FailedRequestsConsumeNoId) {
+  Service s(small_options());
+  const GeomId id = upload_ready(s);
+  ASSERT_TRUE(s.deform(id, pinned_push(1)).get());
+  DeformationRequest free_body;
+  free_body.forces.push_back({3, Vec3(0, 0, 1)});
+  auto undetermined = s.deform(id, free_body).get();
+  ASSERT_FALSE(undetermined);
+  EXPECT_EQ(undetermined.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(undetermined.error().message.find("rigid"), std::string::npos) << undetermined.error().message;
+  DeformationRequest bad_index = pinned_push(1);
+  bad_index.forces[0].index = 25;
+  EXPECT_EQ(s.deform(id, bad_index).get().error().code, ErrorCode::kInvalidArgument);
+  DeformationRequest bad_point = pinned_push(1);
+  bad_point.limit_constraints.push_back({{16, 0, 0.5, 0.5}, Vec3::Zero(), {}, {}});
+  EXPECT_EQ(s.deform(id, bad_point).get().error().code, ErrorCode::kInvalidArgument);
+  auto next = s.deform(id, pinned_push(2)).get();
+  ASSERT_TRUE(next);
+  EXPECT_EQ((*next)->res_id, 2u);
+  EXPECT_EQ(s.deform(GeomId{}, pinned_push(1)).get().error().code, ErrorCode::kNotFound);
+}
+
+TEST(ServiceTest, DeformationWaitsForThePrecomputation) {
+  ServiceOptions o = small_options();
+  o.precompute_jobs = 1;
+  Service s(o);
+  // The slow geometry occupies the only precompute job; the small one waits behind it.
+  ASSERT_TRUE(s.upload(slow_mesh(), exact_material()));
+  auto up = s.upload(exact_grid(), exact_material());
+  ASSERT_TRUE(up);
+  auto future = s.deform(up->id, pinned_push(1));
+  EXPECT_EQ(s.info(up->id)->status, GeometryStatus::kPrecomputing);
+  EXPECT_GE(s.stats().pending_solves, 1u);
+  ASSERT_EQ(future.wait_for(std::chrono::seconds(60)), std::future_status::ready);
+  auto r = future.get();
+  ASSERT_TRUE(r) << r.error().message;
+  EXPECT_EQ((*r)->res_id, 1u);
+  EXPECT_EQ(s.info(up->id)->status, GeometryStatus::kReady);
+}
+
+TEST(ServiceTest, FailedPrecomputationIsReportedNotHung) {
+  ServiceOptions o = small_options();
+  o.precompute.quadrature.gauss_points = 0;  // the engine refuses this: every build fails
+  Service s(o);
+  auto up = s.upload(exact_grid(), exact_material());
+  ASSERT_TRUE(up);
+  auto pending = s.deform(up->id, pinned_push(1));  // may be queued before the build fails
+  ASSERT_EQ(pending.wait_for(std::chrono::seconds(30)), std::future_status::ready);
+  auto r = pending.get();
+  ASSERT_FALSE(r);
+  EXPECT_EQ(r.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(r.error().message.find("precomputation"), std::string::npos) << r.error().message;
+  auto info = s.info(up->id);
+  EXPECT_EQ(info->status, GeometryStatus::kFailed);
+  EXPECT_FALSE(info->error.empty());
+  EXPECT_EQ(s.deform(up->id, pinned_push(1)).get().error().code, ErrorCode::kUnprocessable);
+  EXPECT_FALSE(s.upload(exact_grid(), exact_material())->created);  // not restarted
+  EXPECT_EQ(s.stats().geometries_failed, 1u);
+}
+
+TEST(ServiceTest, LimitCombSumsAndChecks) {
+  Service s(small_options());
+  for (const char* name : {"catmark_nonquads.obj", "catmark_cube.obj"}) {
+    auto up = s.upload(test::load_asset_mesh(name), exact_material());
+    ASSERT_TRUE(up) << up.error().message;
+    const auto mesh = (*s.geometry(up->id))->mesh;
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+      const int32_t subfaces = mesh.face_size(f) == 4 ? 1 : mesh.face_size(f);
+      for (int32_t k = 0; k < subfaces; ++k) {
+        auto comb = s.limit_comb(up->id, {f, k, 0.3, 0.8});
+        ASSERT_TRUE(comb) << comb.error().message;
+        double sp = 0, su = 0, sv = 0;
+        for (size_t i = 0; i < comb->indices.size(); ++i) {
+          sp += comb->position[i];
+          su += comb->du[i];
+          sv += comb->dv[i];
+        }
+        EXPECT_NEAR(sp, 1.0, 1e-12);
+        EXPECT_NEAR(su, 0.0, 1e-12);
+        EXPECT_NEAR(sv, 0.0, 1e-12);
+      }
+    }
+    EXPECT_EQ(s.limit_comb(up->id, {mesh.num_faces(), 0, 0.5, 0.5}).error().code, ErrorCode::kInvalidArgument);
+    EXPECT_EQ(s.limit_comb(up->id, {0, 0, 1.5, 0.5}).error().code, ErrorCode::kInvalidArgument);
+  }
+  // A sub-face a quad does not have.
+  const GeomId grid = upload_ready(s);
+  EXPECT_EQ(s.limit_comb(grid, {0, 1, 0.5, 0.5}).error().code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(s.limit_comb(GeomId{}, {0, 0, 0.5, 0.5}).error().code, ErrorCode::kNotFound);
+}
+
+TEST(ServiceTest, LimitCombIsTheSameBeforeAndAfterThePrecomputation) {
+  ServiceOptions o = small_options();
+  o.precompute_jobs = 1;
+  Service s(o);
+  ASSERT_TRUE(s.upload(slow_mesh(), exact_material()));  // the tagged mesh waits behind this one
+  ControlMesh tagged = test::load_asset_mesh("catmark_cube.obj");
+  tagged.creases().push_back({tagged.face(0)[0], tagged.face(0)[1], 3.0f});
+  tagged.corners().push_back({tagged.face(0)[2], 2.0f});
+  const GeomId id = s.upload(tagged, exact_material()).value().id;
+  const SurfacePoint p{0, 0, 0.1, 0.2};
+  const LimitComb before = s.limit_comb(id, p).value();
+  EXPECT_EQ(s.info(id)->status, GeometryStatus::kPrecomputing);
+  ASSERT_EQ(s.wait_until_precomputed(id, milliseconds(60000))->status, GeometryStatus::kReady);
+  const LimitComb after = s.limit_comb(id, p).value();
+  EXPECT_EQ(before.indices, after.indices);
+  EXPECT_EQ(before.position, after.position);
+  EXPECT_EQ(before.du, after.du);
+  EXPECT_EQ(before.dv, after.dv);
+  // The tags are kept as uploaded.
+  EXPECT_EQ((*s.geometry(id))->mesh, tagged);
+}
+
+TEST(ServiceTest, LagrangeAndLimitConstraintsDisplaceTheLimitPointExactly) {
+  Service s(small_options());
+  const ControlMesh mesh = exact_grid(4);
+  const GeomId id = upload_ready(s, mesh);
+  auto evaluator = LimitEvaluator::create(mesh).value();
+  const SurfacePoint p{5, 0, 0.3, 0.7};
+  const Vec3 target(0.01, -0.02, 0.05);
+  const Vec3 rest = test::limit_point(evaluator, mesh.positions(), p);
+
+  // Lagrange constraint built from limit_comb's weights (the same on every axis).
+  const LimitComb comb = s.limit_comb(id, p).value();
+  DeformationRequest lagrange;
+  lagrange.vertex_constraints = test::pinned_corners(4);
+  LagrangeConstraint c;
+  c.indices = comb.indices;
+  for (double w : comb.position) c.coefficients.push_back(Vec3(w, w, w));
+  c.values = target;
+  lagrange.lagrange_constraints.push_back(c);
+  auto r1 = s.deform(id, lagrange).get();
+  ASSERT_TRUE(r1) << r1.error().message;
+  EXPECT_LT((test::limit_point(evaluator, (*r1)->positions, p) - (rest + target)).norm(), 1e-10);
+
+  // The limit-constraint extension does the same from the server's own stencil.
+  DeformationRequest limit;
+  limit.vertex_constraints = test::pinned_corners(4);
+  limit.limit_constraints.push_back({p, target, {}, {}});
+  auto r2 = s.deform(id, limit).get();
+  ASSERT_TRUE(r2) << r2.error().message;
+  EXPECT_LT((test::limit_point(evaluator, (*r2)->positions, p) - (rest + target)).norm(), 1e-10);
+  for (size_t i = 0; i < mesh.positions().size(); ++i) {
+    EXPECT_LT(((*r1)->positions[i] - (*r2)->positions[i]).norm(), 1e-9) << "control point " << i;
+  }
+}
+
+TEST(ServiceTest, LatestResultAnswersAtOnceOrWaits) {
+  Service s(small_options());
+  const GeomId id = upload_ready(s);
+  auto none = s.latest_result(id, 0, milliseconds(0));
+  ASSERT_TRUE(none);
+  EXPECT_EQ(*none, nullptr);
+  const auto start = Clock::now();
+  auto timed_out = s.latest_result(id, 0, milliseconds(100));
+  ASSERT_TRUE(timed_out);
+  EXPECT_EQ(*timed_out, nullptr);
+  EXPECT_GE(seconds_since(start), 0.09);
+  ASSERT_TRUE(s.deform(id, pinned_push(1)).get());
+  ASSERT_TRUE(s.deform(id, pinned_push(2)).get());
+  auto newest = s.latest_result(id, 0, milliseconds(0));
+  ASSERT_TRUE(newest && *newest);
+  EXPECT_EQ((*newest)->res_id, 2u);
+  EXPECT_EQ(*s.latest_result(id, 2, milliseconds(0)), nullptr);
+  EXPECT_EQ(s.latest_result(GeomId{}, 0, milliseconds(10)).error().code, ErrorCode::kNotFound);
+}
+
+TEST(ServiceTest, WaitersAreWokenWithinMilliseconds) {
+  Service s(small_options());
+  const GeomId id = upload_ready(s);
+  constexpr int kWaiters = 20;
+  std::vector<std::thread> threads;
+  std::vector<double> latency(kWaiters, -1);
+  std::vector<uint32_t> got(kWaiters, 0);
+  for (int i = 0; i < kWaiters; ++i) {
+    threads.emplace_back([&, i] {
+      auto r = s.latest_result(id, 0, milliseconds(20000));
+      if (r && *r) {
+        got[i] = (*r)->res_id;
+        latency[i] = std::chrono::duration<double>(std::chrono::system_clock::now() - (*r)->stored_at).count();
+      }
+    });
+  }
+  while (s.stats().waiters < kWaiters) std::this_thread::sleep_for(milliseconds(1));
+  ASSERT_TRUE(s.deform(id, pinned_push(1)).get());
+  for (auto& t : threads) t.join();
+  double worst = 0;
+  for (int i = 0; i < kWaiters; ++i) {
+    EXPECT_EQ(got[i], 1u);
+    worst = std::max(worst, latency[i]);
+  }
+  // A few milliseconds normally; generous for sanitizer builds on a loaded machine.
+  EXPECT_LT(worst, 0.25) << "slowest wake-up " << worst * 1e3 << " ms";
+  RecordProperty("slowest_wakeup_us", static_cast<int>(worst * 1e6));
+}
+
+TEST(ServiceTest, StopTokenReleasesAWaiter) {
+  Service s(small_options());
+  const GeomId id = upload_ready(s);
+  std::stop_source stop;
+  std::thread stopper([&] {
+    while (s.stats().waiters < 1) std::this_thread::sleep_for(milliseconds(1));
+    stop.request_stop();
+  });
+  const auto start = Clock::now();
+  auto r = s.latest_result(id, 0, milliseconds(30000), stop.get_token());
+  stopper.join();
+  ASSERT_FALSE(r);
+  EXPECT_EQ(r.error().code, ErrorCode::kUnavailable);
+  EXPECT_LT(seconds_since(start), 5.0);
+}
+
+TEST(ServiceTest, ConcurrentDeformationsGetContiguousIdsAndWaitersSeeTheNewest) {
+  Service s(small_options());
+  const GeomId id = upload_ready(s);
+  constexpr int kClients = 8, kEach = 10, kWaiters = 50, kTotal = kClients * kEach;
+  std::vector<std::vector<uint32_t>> ids(kClients);
+  std::vector<uint32_t> last_seen(kWaiters, 0);
+  std::atomic<int> failures{0};
+  std::vector<std::thread> threads;
+  for (int w = 0; w < kWaiters; ++w) {
+    threads.emplace_back([&, w] {
+      uint32_t have = 0;
+      while (have < static_cast<uint32_t>(kTotal)) {
+        auto r = s.latest_result(id, have, milliseconds(20000));
+        if (!r || !*r) {
+          failures.fetch_add(1);
+          return;
+        }
+        if ((*r)->res_id <= have) failures.fetch_add(1);  // never older than what we hold
+        have = (*r)->res_id;
+      }
+      last_seen[w] = have;
+    });
+  }
+  for (int c = 0; c < kClients; ++c) {
+    threads.emplace_back([&, c] {
+      for (int k = 0; k < kEach; ++k) {
+        auto r = s.deform(id, pinned_push(1 + (c * kEach + k) % 7)).get();
+        if (!r) {
+          failures.fetch_add(1);
+          continue;
+        }
+        ids[c].push_back((*r)->res_id);
+      }
+    });
+  }
+  for (auto& t : threads) t.join();
+  EXPECT_EQ(failures.load(), 0);
+  std::set<uint32_t> all;
+  for (const auto& v : ids) {
+    EXPECT_TRUE(std::is_sorted(v.begin(), v.end()));  // one client's requests are stored in its order
+    all.insert(v.begin(), v.end());
+  }
+  ASSERT_EQ(all.size(), static_cast<size_t>(kTotal));  // unique
+  EXPECT_EQ(*all.begin(), 1u);
+  EXPECT_EQ(*all.rbegin(), static_cast<uint32_t>(kTotal));  // contiguous 1..80
+  for (uint32_t seen : last_seen) EXPECT_EQ(seen, static_cast<uint32_t>(kTotal));
+  EXPECT_EQ(s.result_ids(id)->size(), static_cast<size_t>(kTotal));
+  // Every stored result matches a fresh solve of its own request (results keep their requests).
+  for (uint32_t k : {1u, 40u, 80u}) {
+    auto stored = s.result(id, k).value();
+    auto again = s.deform(id, stored->request).get().value();
+    for (size_t i = 0; i < again->positions.size(); ++i) {
+      EXPECT_LT((again->positions[i] - stored->positions[i]).norm(), 1e-12);
+    }
+  }
+}
+
+TEST(ServiceTest, StoreBudgetRefusesWithoutDroppingAnything) {
+  ServiceOptions o = small_options();
+  o.store_bytes = 1000;  // far too small for any geometry
+  Service tiny(o);
+  auto refused = tiny.upload(exact_grid(), exact_material());
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().code, ErrorCode::kResourceExhausted);
+  EXPECT_NE(refused.error().message.find("memory budget"), std::string::npos);
+  EXPECT_TRUE(tiny.geometries().empty());
+
+  // Room for the geometry and three results. The results carry large requests (20000 small
+  // forces, ~0.6 MB each; results keep their requests), larger than the geometry's estimate.
+  DeformationRequest heavy = pinned_push(1);
+  heavy.forces.assign(20000, PointForce{test::grid_index(4, 2, 2), Vec3(0, 0, -1e-5)});
+  Service probe(small_options());
+  const GeomId pid = upload_ready(probe);
+  const size_t geometry_bytes = probe.stats().store_bytes;
+  ASSERT_TRUE(probe.deform(pid, heavy).get());
+  const size_t result_bytes = probe.stats().store_bytes - geometry_bytes;
+  ASSERT_GT(result_bytes, size_t{500000});
+
+  o.store_bytes = geometry_bytes + 3 * result_bytes + result_bytes / 2;
+  Service s(o);
+  const GeomId id = upload_ready(s);
+  int stored = 0;
+  Error last{ErrorCode::kOk, ""};
+  for (int k = 0; k < 10; ++k) {
+    auto r = s.deform(id, heavy).get();
+    if (!r) {
+      last = r.error();
+      break;
+    }
+    ++stored;
+    EXPECT_EQ((*r)->res_id, static_cast<uint32_t>(stored));
+  }
+  EXPECT_EQ(stored, 3);
+  EXPECT_EQ(last.code, ErrorCode::kResourceExhausted) << last.message;
+  EXPECT_NE(last.message.find("never dropped"), std::string::npos) << last.message;
+  // Nothing dropped, no id consumed by the refusals.
+  EXPECT_EQ(s.result_ids(id)->size(), 3u);
+  EXPECT_EQ(s.deform(id, heavy).get().error().code, ErrorCode::kResourceExhausted);
+  EXPECT_EQ(s.result_ids(id)->size(), 3u);
+  EXPECT_EQ(s.result(id, 3).value()->res_id, 3u);
+  EXPECT_GE(s.stats().refused_no_memory, 2u);
+}
+
+TEST(ServiceTest, ShutdownAnswersEverythingPromptly) {
+  ServiceOptions o = small_options();
+  o.precompute_jobs = 1;
+  auto s = std::make_unique<Service>(o);
+  const GeomId ready = upload_ready(*s);
+  ASSERT_TRUE(s->upload(slow_mesh(), exact_material()));  // keeps the precompute job busy
+  auto queued = s->upload(exact_grid(8), exact_material());
+  ASSERT_TRUE(queued);
+  auto pending = s->deform(queued->id, test::pinned_push(1, 8));
+  std::vector<std::thread> waiters;
+  std::atomic<int> released{0};
+  for (int i = 0; i < 10; ++i) {
+    waiters.emplace_back([&] {
+      auto r = s->latest_result(ready, 0, milliseconds(60000));
+      if (!r && r.error().code == ErrorCode::kUnavailable) released.fetch_add(1);
+    });
+  }
+  while (s->stats().waiters < 10) std::this_thread::sleep_for(milliseconds(1));
+  const auto start = Clock::now();
+  s->shutdown();
+  for (auto& t : waiters) t.join();
+  EXPECT_EQ(released.load(), 10);
+  ASSERT_EQ(pending.wait_for(std::chrono::seconds(1)), std::future_status::ready);
+  EXPECT_EQ(pending.get().error().code, ErrorCode::kUnavailable);
+  EXPECT_LT(seconds_since(start), 5.0);
+  EXPECT_EQ(s->upload(exact_grid(2), exact_material()).error().code, ErrorCode::kUnavailable);
+  EXPECT_EQ(s->deform(ready, pinned_push(1)).get().error().code, ErrorCode::kUnavailable);
+  s.reset();  // destructor after shutdown: no hang, no double join
+}
+
+}  // namespace
+}  // namespace softshell::service
