@@ -49,6 +49,8 @@ class InstantSession final : public Session {
     return promise.get_future();
   }
   Result<std::vector<GeometryInfo>> geometries() override { return none(); }
+  Result<GeometryInfo> geometry_info(const GeomId&) override { return none(); }
+  Result<DeformationRequest> result_request(const GeomId&, uint32_t) override { return none(); }
   Result<Geometry> geometry(const GeomId&) override { return none(); }
   Result<DeformationResult> deform(const GeomId&, const DeformationRequest&) override { return none(); }
   Result<std::vector<uint32_t>> result_ids(const GeomId&) override { return none(); }
@@ -145,6 +147,8 @@ Row run(const ControlMesh& mesh, int level, int bodies, bool results, bool backg
         return promises.back().get_future();
       }
       Result<std::vector<GeometryInfo>> geometries() override { return Error{}; }
+      Result<GeometryInfo> geometry_info(const GeomId&) override { return Error{}; }
+      Result<DeformationRequest> result_request(const GeomId&, uint32_t) override { return Error{}; }
       Result<Geometry> geometry(const GeomId&) override { return Error{}; }
       Result<DeformationResult> deform(const GeomId&, const DeformationRequest&) override { return Error{}; }
       Result<std::vector<uint32_t>> result_ids(const GeomId&) override { return Error{}; }

@@ -19,7 +19,7 @@ DeformationRequest numbered(int32_t n) {
 }
 
 TEST(LatestWinsChannel, OneInFlightAndTheNewestWaiting) {
-  auto session = std::make_shared<test::ScriptedSession>(test::make_grid(2, 2));
+  auto session = std::make_shared<test::ManualSession>(test::make_grid(2, 2));
   LatestWinsChannel channel(session, GeomId{}, 0.0);
   const auto t0 = Clock::now();
 
@@ -60,7 +60,7 @@ TEST(LatestWinsChannel, OneInFlightAndTheNewestWaiting) {
 }
 
 TEST(LatestWinsChannel, RateLimit) {
-  auto session = std::make_shared<test::ScriptedSession>(test::make_grid(2, 2));
+  auto session = std::make_shared<test::ManualSession>(test::make_grid(2, 2));
   LatestWinsChannel channel(session, GeomId{}, 10.0);  // one request per 100 ms
   const auto t0 = Clock::now();
   channel.submit(numbered(1), t0);
@@ -79,7 +79,7 @@ TEST(LatestWinsChannel, RateLimit) {
 }
 
 TEST(LatestWinsChannel, RejectsBadArguments) {
-  auto session = std::make_shared<test::ScriptedSession>(test::make_grid(2, 2));
+  auto session = std::make_shared<test::ManualSession>(test::make_grid(2, 2));
   EXPECT_THROW(LatestWinsChannel(nullptr, GeomId{}, 0.0), Exception);
   EXPECT_THROW(LatestWinsChannel(session, GeomId{}, -1.0), Exception);
   EXPECT_THROW(LatestWinsChannel(session, GeomId{}, std::nan("")), Exception);

@@ -8,9 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "bullet_world.h"
-#if SOFTSHELL_TEST_HAVE_EMBEDDED
 #include "softshell/embedded_session.h"
-#endif
 #include "test_meshes.h"
 #include "test_sessions.h"
 
@@ -19,13 +17,8 @@ namespace {
 
 using namespace std::chrono_literals;
 
-#if SOFTSHELL_TEST_HAVE_EMBEDDED
 // The real in-process server.
 std::shared_ptr<Session> make_session() { return std::make_shared<EmbeddedSession>(); }
-#else
-// Interim until EmbeddedSession is on main: the same engine, without the service around it.
-std::shared_ptr<Session> make_session() { return std::make_shared<test::EngineSession>(); }
-#endif
 
 constexpr double kGravity = 9.81;
 constexpr double kStep = 1.0 / 120.0;
@@ -316,11 +309,11 @@ TEST(ShellBridge, FloorConstraintsDetermineAShellLyingOnTheFloor) {
 }
 
 TEST(ShellBridge, RequestsCarryTheSupportsAndTheSpreadContactForces) {
-  // A scripted session that never answers on its own: what goes out is what is checked.
+  // A manual session that never answers on its own: what goes out is what is checked.
   Plate plate;
   test::BulletWorld scene;
   ShellBridge bridge(scene.world);
-  auto session = std::make_shared<test::ScriptedSession>(plate.mesh);
+  auto session = std::make_shared<test::ManualSession>(plate.mesh);
   ShellSettings settings = plate.settings();
   settings.response_time = 0.0;
   settings.stabilize = false;
@@ -375,7 +368,7 @@ TEST(ShellBridge, HandlesAndBadSettings) {
   Plate plate;
   test::BulletWorld scene;
   ShellBridge bridge(scene.world);
-  auto session = std::make_shared<test::ScriptedSession>(plate.mesh);
+  auto session = std::make_shared<test::ManualSession>(plate.mesh);
   const ShellId a = bridge.add_shell(session, GeomId{}, plate.mesh, plate.settings()).value();
   const ShellId b = bridge.add_shell(session, GeomId{}, plate.mesh, plate.settings()).value();
   EXPECT_EQ(bridge.shells().size(), 2u);
