@@ -1,7 +1,10 @@
 #include "softshell/bullet/floor_constraints.h"
 
+#include "softshell/interaction.h"
+
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
 
 namespace softshell::bullet {
@@ -52,6 +55,48 @@ Result<std::vector<VertexConstraint>> floor_constraints(const Tessellation& tess
     for (size_t k = 0; k < held.size(); ++k) {
       if (held[k]) out.push_back(VertexConstraint{static_cast<int32_t>(k), settings.mask, Vec3::Zero()});
     }
+    return out;
+  });
+}
+
+Result<DeformationRequest> floor_request(const Tessellation& tessellation, const Eigen::Isometry3d& shell_to_world,
+                                         const FloorSettings& settings) {
+  if (settings.hold == FloorHold::kControlPoints) {
+    auto held = floor_constraints(tessellation, shell_to_world, settings);
+    if (!held) return held.error();
+    DeformationRequest out;
+    out.vertex_constraints = std::move(*held);
+    return out;
+  }
+  return capture([&]() -> DeformationRequest {
+    if (!settings.point.allFinite() || !settings.normal.allFinite() || !(settings.normal.norm() > 0.0)) {
+      fail(ErrorCode::kInvalidArgument, "the floor plane needs a finite point and a finite, non-zero normal");
+    }
+    if (!shell_to_world.matrix().allFinite()) fail(ErrorCode::kInvalidArgument, "non-finite shell transform");
+    // The plane in the shell's frame, where the tessellation and the constraints live.
+    const Eigen::Isometry3d world_to_shell = shell_to_world.inverse();
+    Plane plane;
+    plane.point = world_to_shell * settings.point;
+    plane.normal = world_to_shell.linear() * settings.normal.normalized();
+    FloorOptions options;
+    options.tolerance = settings.tolerance;
+    if (settings.mask == kAxisAll) {
+      options.axes = FloorAxes::kAll;
+    } else {
+      int axis = -1;
+      for (int a = 0; a < 3; ++a) {
+        if (std::abs(std::abs(plane.normal[a]) - 1.0) <= 1e-9) axis = a;
+      }
+      if (axis < 0 || settings.mask != (1u << axis)) {
+        fail(ErrorCode::kInvalidArgument,
+             "floor hold kLimitPoints takes a mask of all axes or of the floor normal's axis in the shell's frame");
+      }
+      options.axes = FloorAxes::kNormal;
+    }
+    auto contact = floor_contact(tessellation, plane, options);
+    if (!contact) throw Exception(contact.error());
+    DeformationRequest out;
+    contact->add_to(out);
     return out;
   });
 }

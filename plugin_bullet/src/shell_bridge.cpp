@@ -89,7 +89,7 @@ struct ShellBridge::Shell {
   double max_point_force = 0.0;  // largest control-point force of the last frame with contacts (N)
   std::vector<Vec3> rest;        // rest control points
   DeformationRequest base;       // supports + floor constraints
-  std::vector<VertexConstraint> floor;
+  DeformationRequest floor;      // the floor's constraints
   std::vector<ContactForce> contacts;
   ShellStats stats;
 
@@ -131,12 +131,13 @@ Result<ShellId> ShellBridge::add_shell(std::shared_ptr<Session> session, const G
     // Supports: the app's constraints and loads, then the floor.
     shell->base = settings.supports;
     if (settings.floor.enabled) {
-      auto floor = bullet::floor_constraints(shell->mesh->tessellation(), to_isometry(settings.transform),
-                                             settings.floor);
+      auto floor = floor_request(shell->mesh->tessellation(), to_isometry(settings.transform), settings.floor);
       if (!floor) throw Exception(floor.error());
       shell->floor = std::move(*floor);
-      shell->base.vertex_constraints.insert(shell->base.vertex_constraints.end(), shell->floor.begin(),
-                                            shell->floor.end());
+      auto append = [](auto& to, const auto& from) { to.insert(to.end(), from.begin(), from.end()); };
+      append(shell->base.vertex_constraints, shell->floor.vertex_constraints);
+      append(shell->base.lagrange_constraints, shell->floor.lagrange_constraints);
+      append(shell->base.limit_constraints, shell->floor.limit_constraints);
     }
 
     // The static collision object.
@@ -479,7 +480,7 @@ const std::vector<Vec3>& ShellBridge::control_positions(ShellId shell) const {
   return get(shell).mesh->control_positions();
 }
 const std::vector<ContactForce>& ShellBridge::contacts(ShellId shell) const { return get(shell).contacts; }
-const std::vector<VertexConstraint>& ShellBridge::floor_constraints(ShellId shell) const { return get(shell).floor; }
+const DeformationRequest& ShellBridge::floor(ShellId shell) const { return get(shell).floor; }
 const DeformationRequest* ShellBridge::last_sent_request(ShellId shell) const {
   return get(shell).channel.last_sent();
 }

@@ -67,6 +67,45 @@ TEST(FloorConstraints, FollowThePlacementInTheWorld) {
   EXPECT_GT(floor_constraints(t, placement, floor)->size(), 10u);
 }
 
+TEST(FloorConstraints, RequestHoldsControlPointsOrLimitPoints) {
+  const ControlMesh mesh = arch();
+  const Tessellation t = tessellate(mesh);
+  // A y-up world: the arch's local z is the world's y, standing on y = -2.
+  Eigen::Isometry3d placement = Eigen::Isometry3d::Identity();
+  placement.linear() = Eigen::AngleAxisd(-std::numbers::pi / 2, Vec3::UnitX()).toRotationMatrix();
+  placement.translation() = Vec3(5.0, -2.0, 1.0);
+  FloorSettings floor;
+  floor.normal = Vec3::UnitY();
+  floor.point = Vec3(0.0, -2.0, 0.0);
+
+  auto vertex = floor_request(t, placement, floor);
+  ASSERT_TRUE(vertex.ok()) << vertex.error().message;
+  const auto direct = floor_constraints(t, placement, floor).value();
+  ASSERT_EQ(vertex->vertex_constraints.size(), direct.size());
+  for (size_t i = 0; i < direct.size(); ++i) EXPECT_EQ(vertex->vertex_constraints[i].index, direct[i].index);
+  EXPECT_TRUE(vertex->limit_constraints.empty());
+  EXPECT_TRUE(vertex->fits_binary_layout());
+
+  floor.hold = FloorHold::kLimitPoints;
+  auto limit = floor_request(t, placement, floor);
+  ASSERT_TRUE(limit.ok()) << limit.error().message;
+  EXPECT_TRUE(limit->vertex_constraints.empty());
+  ASSERT_EQ(limit->limit_constraints.size(), 8u);  // one per face along each foot
+  const auto evaluator = LimitEvaluator::create(mesh).value();
+  for (const LimitConstraint& c : limit->limit_constraints) {
+    EXPECT_NEAR(evaluator.evaluate(c.point).position.z(), 0.0, 1e-3);  // on the floor (local z = 0)
+    EXPECT_TRUE(c.displacement.isZero(1e-12));
+  }
+
+  // Only the normal: one Lagrange row per point, on the normal's axis in the shell's frame (z).
+  floor.mask = kAxisZ;
+  auto normal = floor_request(t, placement, floor);
+  ASSERT_TRUE(normal.ok()) << normal.error().message;
+  EXPECT_EQ(normal->lagrange_constraints.size(), 8u);
+  floor.mask = kAxisY;  // the world's axis, not the shell's
+  EXPECT_EQ(floor_request(t, placement, floor).error().code, ErrorCode::kInvalidArgument);
+}
+
 TEST(FloorConstraints, RejectBadPlanes) {
   const Tessellation t = tessellate(arch(), 1);
   FloorSettings floor;

@@ -258,12 +258,13 @@ struct ArchScene {
   std::unique_ptr<ShellBridge> bridge = std::make_unique<ShellBridge>(scene.world);
   ShellId shell;
 
-  explicit ArchScene(bool floor) {
+  explicit ArchScene(bool floor, FloorHold hold = FloorHold::kControlPoints) {
     ShellSettings s;
     s.mesh.level = 2;
     s.max_request_rate = 0.0;
     s.floor.enabled = floor;
     s.floor.normal = Vec3::UnitZ();
+    s.floor.hold = hold;
     shell = bridge->add_shell(make_session(), mesh, material, s).value();
     btRigidBody* box = scene.add_box(btVector3(0.05f, 0.05f, 0.05f), 2.0, btVector3(0.5f, 0.3f, 0.36f));
     box->setActivationState(DISABLE_DEACTIVATION);
@@ -272,25 +273,39 @@ struct ArchScene {
 };
 
 TEST(ShellBridge, FloorConstraintsDetermineAShellLyingOnTheFloor) {
-  ArchScene with_floor(true);
-  ShellBridge& bridge = *with_floor.bridge;
-  lockstep(with_floor.scene, bridge, 120);
-  const ShellStats stats = bridge.stats(with_floor.shell);
-  EXPECT_GT(stats.channel.sent, 0u);
-  EXPECT_EQ(stats.channel.failed, 0u);
-  EXPECT_FALSE(stats.last_error) << stats.last_error->message;
-  EXPECT_GT(stats.results_applied, 0u);
-  // Both feet are held, the crown gives under the box.
-  const auto& floor = bridge.floor_constraints(with_floor.shell);
-  EXPECT_EQ(floor.size(), 10u);
-  const auto& now = bridge.control_positions(with_floor.shell);
-  const auto& rest = with_floor.mesh.positions();
-  for (const VertexConstraint& c : floor) EXPECT_LT((now[size_t(c.index)] - rest[size_t(c.index)]).norm(), 1e-6);
-  const size_t crown = size_t(test::grid_index(8, 4, 2));
-  EXPECT_LT(now[crown].z() - rest[crown].z(), -1e-5);
-  const DeformationRequest* sent = bridge.last_sent_request(with_floor.shell);
-  ASSERT_NE(sent, nullptr);
-  EXPECT_NEAR(total_force(*sent).z(), -2.0 * kGravity, 0.05 * 2.0 * kGravity);
+  for (FloorHold hold : {FloorHold::kControlPoints, FloorHold::kLimitPoints}) {
+    SCOPED_TRACE(hold == FloorHold::kControlPoints ? "control points" : "limit points");
+    ArchScene with_floor(true, hold);
+    ShellBridge& bridge = *with_floor.bridge;
+    lockstep(with_floor.scene, bridge, 120);
+    const ShellStats stats = bridge.stats(with_floor.shell);
+    EXPECT_GT(stats.channel.sent, 0u);
+    EXPECT_EQ(stats.channel.failed, 0u);
+    EXPECT_FALSE(stats.last_error) << stats.last_error->message;
+    EXPECT_GT(stats.results_applied, 0u);
+    // Both feet are held, the crown gives under the box.
+    const DeformationRequest& floor = bridge.floor(with_floor.shell);
+    const auto& now = bridge.control_positions(with_floor.shell);
+    const auto& rest = with_floor.mesh.positions();
+    if (hold == FloorHold::kControlPoints) {
+      EXPECT_EQ(floor.vertex_constraints.size(), 10u);
+      for (const VertexConstraint& c : floor.vertex_constraints) {
+        EXPECT_LT((now[size_t(c.index)] - rest[size_t(c.index)]).norm(), 1e-6);
+      }
+    } else {
+      // One limit point per touching face: the 4 faces along each foot.
+      EXPECT_EQ(floor.limit_constraints.size(), 8u);
+      const auto evaluator = LimitEvaluator::create(with_floor.mesh).value();
+      for (const LimitConstraint& c : floor.limit_constraints) {
+        EXPECT_LT((evaluator.evaluate(c.point, now).position - evaluator.evaluate(c.point).position).norm(), 1e-6);
+      }
+    }
+    const size_t crown = size_t(test::grid_index(8, 4, 2));
+    EXPECT_LT(now[crown].z() - rest[crown].z(), -1e-5);
+    const DeformationRequest* sent = bridge.last_sent_request(with_floor.shell);
+    ASSERT_NE(sent, nullptr);
+    EXPECT_NEAR(total_force(*sent).z(), -2.0 * kGravity, 0.05 * 2.0 * kGravity);
+  }
 
   // Without the floor nothing holds the arch: the server says the system is undetermined, the
   // bridge keeps going and reports it.
@@ -301,7 +316,7 @@ TEST(ShellBridge, FloorConstraintsDetermineAShellLyingOnTheFloor) {
     ASSERT_TRUE(free.bridge->wait_idle(10s).ok());
   }
   const ShellStats free_stats = free.bridge->stats(free.shell);
-  EXPECT_TRUE(free.bridge->floor_constraints(free.shell).empty());
+  EXPECT_TRUE(free.bridge->floor(free.shell).empty());
   EXPECT_GT(free_stats.channel.failed, 0u);
   EXPECT_EQ(free_stats.results_applied, 0u);
   ASSERT_TRUE(free_stats.last_error);

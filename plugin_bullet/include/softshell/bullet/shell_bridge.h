@@ -178,8 +178,8 @@ class ShellBridge {
   const std::vector<Vec3>& control_positions(ShellId shell) const;
   /// Contacts read by the last `update`.
   const std::vector<ContactForce>& contacts(ShellId shell) const;
-  /// The vertex constraints the floor adds (empty if the floor is off or not touched).
-  const std::vector<VertexConstraint>& floor_constraints(ShellId shell) const;
+  /// The constraints the floor adds to every request (none if the floor is off or not touched).
+  const DeformationRequest& floor(ShellId shell) const;
   /// The request sent most recently, or nullptr.
   const DeformationRequest* last_sent_request(ShellId shell) const;
   /// The geometry and its session.
