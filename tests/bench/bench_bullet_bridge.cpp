@@ -115,7 +115,7 @@ Row run(const ControlMesh& mesh, int level, int bodies, bool results, bool backg
   for (int b = 0; b < bodies; ++b) {
     const size_t v = pick(rng);
     const Vec3 n = t.normals()[v];
-    const Vec3 at = t.vertices()[v] + n * (radius * 0.999);
+    const Vec3 at = t.vertices()[v] + n * (radius * 0.95);  // touching from the start
     btTransform start;
     start.setIdentity();
     start.setOrigin(btVector3(float(at.x()), float(at.y()), float(at.z())));
