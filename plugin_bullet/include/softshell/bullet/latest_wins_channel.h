@@ -47,6 +47,7 @@ class LatestWinsChannel {
   using Clock = std::chrono::steady_clock;
 
   /// `max_rate` (requests per second, >= 0; 0 = unlimited) bounds how often requests are sent.
+  /// Throws `Exception(kInvalidArgument)` for a null session or a negative / non-finite rate.
   LatestWinsChannel(std::shared_ptr<Session> session, GeomId geometry, double max_rate = 0.0);
   ~LatestWinsChannel();
   LatestWinsChannel(const LatestWinsChannel&) = delete;
