@@ -1,6 +1,10 @@
 #include "bullet_phase.h"
 
+#include <chrono>
 #include <cmath>
+#include <thread>
+#include <cstdio>
+#include <cstdlib>
 #include <tuple>
 
 #include <btBulletDynamicsCommon.h>
@@ -56,6 +60,9 @@ BulletPhaseResult run_bullet_phase(const std::shared_ptr<Session>& session, cons
   bullet::ShellBridge bridge(world);
   bullet::ShellSettings settings;
   settings.mesh.level = std::max(1, level - 1);
+  // The demo steps Bullet faster than real time, so the wall-clock rate limit (made for a game
+  // loop at 60 Hz) would let only a few requests through.
+  settings.max_request_rate = 0.0;
   floor.add_to(settings.supports);
   const bullet::ShellId shell = bridge.add_shell(session, id, mesh, settings).value();
 
@@ -100,8 +107,12 @@ BulletPhaseResult run_bullet_phase(const std::shared_ptr<Session>& session, cons
   }
   out.bodies = static_cast<int>(bodies.size());
 
+  // The physics loop runs at four times real time (a 60 Hz game would step every 16.7 ms): fast
+  // enough for a demo, slow enough that the server answers between frames as it would in a game.
   uint32_t shown = 0;
+  const auto loop_start = std::chrono::steady_clock::now();
   for (int step = 0; step < steps; ++step) {
+    std::this_thread::sleep_until(loop_start + step * std::chrono::microseconds(4167));
     world.stepSimulation(1.0f / 60.0f, 1, 1.0f / 60.0f);
     const bullet::UpdateReport report = bridge.update();
     out.contacts += report.contacts;
@@ -116,6 +127,13 @@ BulletPhaseResult run_bullet_phase(const std::shared_ptr<Session>& session, cons
   const bullet::ShellStats stats = bridge.stats(shell);
   if (stats.res_id != shown && on_result) on_result(stats.res_id);
   out.requests = static_cast<int>(stats.channel.sent);
+  if (std::getenv("SOFTSHELL_DEMO_DEBUG")) {
+    std::fprintf(stderr, "bridge: submitted %llu sent %llu replaced %llu completed %llu failed %llu unchanged %llu tc %g\n",
+                 (unsigned long long)stats.channel.submitted, (unsigned long long)stats.channel.sent,
+                 (unsigned long long)stats.channel.replaced, (unsigned long long)stats.channel.completed,
+                 (unsigned long long)stats.channel.failed, (unsigned long long)stats.unchanged_frames, stats.time_constant);
+    if (stats.last_error) std::fprintf(stderr, "bridge error: %s\n", stats.last_error->message.c_str());
+  }
   if (stats.res_id != 0) out.positions = bridge.control_positions(shell);
 
   for (const Body& b : bodies) {

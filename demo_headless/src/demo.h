@@ -14,15 +14,15 @@ namespace softshell::demo {
 
 struct DemoOptions {
   std::filesystem::path mesh;            ///< control mesh (OBJ); empty = the shipped spot
-  Material material;                     ///< SI units, the mesh's unit is metres
-  std::string material_name = "aluminium";
+  Material material = material_preset("rubber", 0.01).value();  ///< SI units, the mesh's unit is metres
+  std::string material_name = "rubber";
   std::string server_url;                ///< empty = embedded server (with an HTTP listener for the follower)
   std::filesystem::path out_dir = "demo-out";
   int level = 3;                         ///< tessellation level for picking, rendering and the OBJ
   int deformations = 120;                ///< at least this many push/pull deformations (>= 10)
   bool follower = true;                  ///< run the second client
   bool bullet = true;                    ///< drop rigid bodies through the Bullet bridge
-  int bullet_steps = 180;                ///< Bullet steps at 1/60 s
+  int bullet_steps = 240;                ///< Bullet steps at 1/60 s
   bool pictures = true;                  ///< write PNGs
   int picture_width = 800, picture_height = 600;
   std::function<void(const std::string&)> progress;  ///< progress lines (stderr), may be empty
