@@ -23,6 +23,7 @@
 #include "softshell/mesh_validation.h"
 #include "softshell/obj_io.h"
 #include "softshell/picking.h"
+#include "softshell/remote_session.h"
 #include "softshell/session.h"
 #include "softshell/softshell_c_bridge.h"
 #include "softshell/tessellation.h"
@@ -893,6 +894,31 @@ ss_status ss_refinement_request_to_fine(const ss_refinement* refinement, const s
 
 // ------------------------------------------------------------------------------------------------
 // Sessions
+
+void ss_remote_options_default(ss_remote_options* out) {
+  if (out) *out = ss_remote_options{0, 0, 0, 0};
+}
+
+ss_status ss_session_create_remote(const char* url, const ss_remote_options* options, ss_session** out_session) {
+  return guard("ss_session_create_remote", [&] {
+    required(out_session, "out_session");
+    *out_session = nullptr;
+    required(url, "url");
+    ss_remote_options o;
+    ss_remote_options_default(&o);
+    if (options) o = *options;
+    if (o.connect_timeout_ms < 0 || o.request_timeout_ms < 0 || o.async_threads < 0 || o.async_threads > 256) {
+      fail(ErrorCode::kInvalidArgument, "remote options: timeouts must be >= 0 and async_threads in 0..256");
+    }
+    softshell::RemoteSessionOptions ro;
+    ro.format = o.binary ? softshell::wire::Format::kBinary : softshell::wire::Format::kJson;
+    if (o.connect_timeout_ms > 0) ro.connect_timeout = std::chrono::milliseconds(o.connect_timeout_ms);
+    if (o.request_timeout_ms > 0) ro.request_timeout = std::chrono::milliseconds(o.request_timeout_ms);
+    if (o.async_threads > 0) ro.async_threads = o.async_threads;
+    std::shared_ptr<softshell::Session> session = softshell::RemoteSession::connect(url, ro).value();
+    *out_session = softshell::c_api::wrap_session(std::move(session));
+  });
+}
 
 void ss_session_destroy(ss_session* session) { destroy(session, kSessionTag); }
 

@@ -204,6 +204,40 @@ int main(void) {
   memset(&unknown, 7, sizeof unknown);
   CHECK_STATUS(ss_session_deform(session, &unknown, request, &res_id, deformed, NV, &count), SS_NOT_FOUND);
 
+  /* The same through HTTP: a second in-process server with a listener, and a remote session. */
+  ss_embedded_options listening;
+  ss_embedded_options_default(&listening);
+  listening.http_host = "127.0.0.1";
+  ss_session* host = NULL;
+  CHECK_OK(ss_session_create_embedded(&listening, &host));
+  int32_t port = 0;
+  CHECK_OK(ss_session_embedded_port(host, &port));
+  CHECK(port > 0);
+  char url[64];
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", (int)port);
+  ss_session* remote = NULL;
+  CHECK_OK(ss_session_create_remote(url, NULL, &remote));
+  if (remote) {
+    CHECK_OK(ss_session_upload(remote, mesh, &material, "c-test", &again, &created));
+    CHECK(created == 1 && memcmp(id.bytes, again.bytes, 16) == 0); /* same content, same id */
+    CHECK_OK(ss_session_deform_begin(remote, &again, request, &op));
+    CHECK(wait_for(op, &polls));
+    CHECK_OK(ss_deformation_read(op, &res_id, deformed, NV, &count));
+    ss_deformation_destroy(op);
+    CHECK_OK(ss_evaluator_evaluate(ev, &pick.point, deformed, NV, &s));
+    CHECK(fabs(s.position.x - target.x) + fabs(s.position.y - target.y) + fabs(s.position.z - target.z) < 1e-9);
+  }
+  ss_session_destroy(remote);
+  ss_session_destroy(host);
+  CHECK_STATUS(ss_session_embedded_port(session, NULL), SS_INVALID_ARGUMENT);
+  ss_session* nowhere = NULL;
+  ss_remote_options quick;
+  ss_remote_options_default(&quick);
+  quick.connect_timeout_ms = 500;
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", (int)port); /* the listener is closed now */
+  CHECK_STATUS(ss_session_create_remote(url, &quick, &nowhere), SS_UNAVAILABLE);
+  CHECK(nowhere == NULL);
+
   /* Releasing a running operation and the session never blocks. */
   CHECK_OK(ss_session_deform_begin(session, &id, request, &op));
   ss_deformation_destroy(op);

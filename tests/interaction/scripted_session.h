@@ -26,9 +26,8 @@ class ScriptedSession : public Session {
   }
   Result<std::vector<GeometryInfo>> geometries() override { return unsupported(); }
   Result<Geometry> geometry(const GeomId&) override { return unsupported(); }
-  // Overrides once the service's Session extensions are merged (no `override` keyword until then).
-  Result<GeometryInfo> geometry_info(const GeomId&) { return unsupported(); }
-  Result<DeformationRequest> result_request(const GeomId&, uint32_t) { return unsupported(); }
+  Result<GeometryInfo> geometry_info(const GeomId&) override { return unsupported(); }
+  Result<DeformationRequest> result_request(const GeomId&, uint32_t) override { return unsupported(); }
   Result<DeformationResult> deform(const GeomId& id, const DeformationRequest& request) override {
     auto future = deform_async(id, request);
     finish(calls() - 1);

@@ -340,9 +340,23 @@ SS_API ss_status ss_refinement_request_to_fine(const ss_refinement* refinement, 
                                                int32_t force_transfer, ss_request** out_fine_request);
 
 /* ---------------------------------------------------------------------------------------------
- * Sessions (a session handle is made by a session factory: `ss_session_create_embedded` in
- * softshell_embedded_c.h for the in-process server; the remote one is added when the SDK's
- * RemoteSession is available) */
+ * Sessions: `ss_session_create_remote` (below) talks to a server over HTTP;
+ * `ss_session_create_embedded` (softshell_embedded_c.h, in the server library) runs one in-process */
+
+/** Options of a remote session. */
+typedef struct ss_remote_options {
+  int32_t connect_timeout_ms;  /* time to open a connection; 0: 5000 */
+  int32_t request_timeout_ms;  /* time for one request (a deformation may wait for the server's
+                                  precomputation); 0: 300000 */
+  int32_t binary;              /* != 0: the paper's binary layouts where a body fits them (results in
+                                  f32); 0 (default): JSON, double precision */
+  int32_t async_threads;       /* threads running asynchronous deformations; 0: 2 */
+} ss_remote_options;
+SS_API void ss_remote_options_default(ss_remote_options* out);
+/** A session with the server at `url` (`http://host:port` or `host:port`) that answered
+ *  `GET /health`; SS_UNAVAILABLE if it did not. `options` NULL: defaults. */
+SS_API ss_status ss_session_create_remote(const char* url, const ss_remote_options* options,
+                                          ss_session** out_session);
 
 SS_API void ss_session_destroy(ss_session* session);
 /** 32 lowercase hex characters plus NUL into `out` (capacity >= 33 chars). */
