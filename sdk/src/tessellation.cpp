@@ -190,6 +190,7 @@ Result<Tessellation> Tessellation::create(const LimitEvaluator& evaluator, int l
     Tessellation t;
     t.evaluator_ = evaluator;
     t.level_ = level;
+    t.control_positions_ = mesh.positions();
 
     // Uniform refinement of the topology (the evaluator's refiner stays at the base level).
     std::unique_ptr<Far::TopologyRefiner> refiner = internal::make_refiner(mesh);
@@ -399,6 +400,7 @@ void Tessellation::update(const std::vector<Vec3>& positions) {
     Vec3 n = Vec3(U.row(i).transpose()).cross(Vec3(V.row(i).transpose()));
     normals_[static_cast<size_t>(i)] = n.norm() > 0.0 ? Vec3(n.normalized()) : Vec3::Zero();
   }
+  control_positions_ = positions;
 }
 
 }  // namespace softshell

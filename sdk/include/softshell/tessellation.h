@@ -104,6 +104,12 @@ class Tessellation {
   /// The sparse matrix S (#vertices x #control points) with vertices = S * control positions.
   const Eigen::SparseMatrix<double, Eigen::RowMajor>& limit_matrix() const;
 
+  /// The evaluator this tessellation was built from (shares its immutable data).
+  const LimitEvaluator& evaluator() const { return *evaluator_; }
+  /// The control positions (#V) `vertices()` currently show: the mesh's rest positions after
+  /// `create`, the argument of the last `update` afterwards.
+  const std::vector<Vec3>& control_positions() const { return control_positions_; }
+
  private:
   struct Lazy;  // caches built on first use (chordal error, limit matrices), guarded by a mutex
   Tessellation();
@@ -115,6 +121,7 @@ class Tessellation {
   std::vector<std::array<int32_t, 3>> triangles_;
   std::vector<Quad> quads_;
   std::vector<SurfacePoint> vertex_points_;
+  std::vector<Vec3> control_positions_;
   std::unique_ptr<Lazy> lazy_;
 };
 

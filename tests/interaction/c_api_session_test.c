@@ -1,0 +1,255 @@
+/* A whole session through the C ABI from plain C11, on the in-process server
+ * (softshell_embedded_c.h): upload, pick, grab, asynchronous deformation polled like a game loop,
+ * reading the deformed control points, and errors reported by the server. */
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "softshell/softshell_c.h"
+#include "softshell/softshell_embedded_c.h"
+
+static int g_failures = 0;
+static int g_checks = 0;
+
+#define CHECK(cond)                                                                                    \
+  do {                                                                                                 \
+    ++g_checks;                                                                                        \
+    if (!(cond)) {                                                                                     \
+      fprintf(stderr, "%s:%d: CHECK failed: %s (last error: %s)\n", __FILE__, __LINE__, #cond,          \
+              ss_last_error_message());                                                                \
+      ++g_failures;                                                                                    \
+    }                                                                                                  \
+  } while (0)
+
+#define CHECK_STATUS(expr, expected)                                                                   \
+  do {                                                                                                 \
+    ++g_checks;                                                                                        \
+    ss_status s_ = (expr);                                                                             \
+    if (s_ != (expected)) {                                                                            \
+      fprintf(stderr, "%s:%d: %s returned %s, expected %s (%s)\n", __FILE__, __LINE__, #expr,           \
+              ss_status_name(s_), ss_status_name(expected), ss_last_error_message());                  \
+      ++g_failures;                                                                                    \
+    }                                                                                                  \
+  } while (0)
+
+#define CHECK_OK(expr) CHECK_STATUS(expr, SS_OK)
+
+enum { N = 6, NV = (N + 1) * (N + 1) };
+
+/* A gently curved N x N plate over [0, 1]^2. */
+static ss_mesh* make_plate(void) {
+  double xyz[3 * NV];
+  int32_t sizes[N * N], indices[4 * N * N];
+  for (int j = 0; j <= N; ++j) {
+    for (int i = 0; i <= N; ++i) {
+      const double x = (double)i / N, y = (double)j / N;
+      double* p = xyz + 3 * (j * (N + 1) + i);
+      p[0] = x;
+      p[1] = y;
+      p[2] = 0.1 * x * (1.0 - x) + 0.05 * y * y;
+    }
+  }
+  for (int j = 0; j < N; ++j) {
+    for (int i = 0; i < N; ++i) {
+      const int f = j * N + i;
+      sizes[f] = 4;
+      indices[4 * f + 0] = j * (N + 1) + i;
+      indices[4 * f + 1] = j * (N + 1) + i + 1;
+      indices[4 * f + 2] = (j + 1) * (N + 1) + i + 1;
+      indices[4 * f + 3] = (j + 1) * (N + 1) + i;
+    }
+  }
+  ss_mesh* mesh = NULL;
+  CHECK_OK(ss_mesh_create(xyz, NV, sizes, N * N, indices, 4 * N * N, &mesh));
+  return mesh;
+}
+
+/* The edge y = 0 clamped: the first two rows fixed on all axes. */
+static void clamp(ss_request* request) {
+  const ss_vec3 zero = {0, 0, 0};
+  for (int j = 0; j < 2; ++j) {
+    for (int i = 0; i <= N; ++i) CHECK_OK(ss_request_add_vertex_constraint(request, j * (N + 1) + i, 7, &zero));
+  }
+}
+
+/* Polls like a game loop: a frame of work between polls, never blocking for long. */
+static int wait_for(ss_deformation* op, int* out_polls) {
+  int32_t ready = 0;
+  int polls = 0;
+  while (!ready && polls < 60000) {
+    CHECK_OK(ss_deformation_poll(op, &ready));
+    ++polls;
+    if (!ready) CHECK_OK(ss_deformation_wait(op, 5, &ready)); /* stands in for a 5 ms frame */
+  }
+  *out_polls = polls;
+  return ready;
+}
+
+int main(void) {
+  ss_embedded_options options;
+  ss_embedded_options_default(&options);
+  CHECK(options.http_host == NULL && options.worker_threads == 0);
+  ss_session* session = NULL;
+  CHECK_OK(ss_session_create_embedded(&options, &session));
+  if (!session) {
+    printf("c_api_session_test: %d checks, %d failures (no session)\n", g_checks, g_failures);
+    return 1;
+  }
+  options.http_port = 70000;
+  options.http_host = "127.0.0.1";
+  ss_session* bad = NULL;
+  CHECK_STATUS(ss_session_create_embedded(&options, &bad), SS_INVALID_ARGUMENT);
+  CHECK(bad == NULL);
+
+  /* Upload (idempotent). */
+  ss_mesh* mesh = make_plate();
+  const ss_material material = {7.0e10, 0.3, 0.01, 2700.0};
+  ss_geom_id id;
+  int32_t created = -1;
+  CHECK_OK(ss_session_upload(session, mesh, &material, "c-test", &id, &created));
+  CHECK(created == 1);
+  ss_geom_id again;
+  CHECK_OK(ss_session_upload(session, mesh, &material, "c-test", &again, &created));
+  CHECK(created == 0 && memcmp(id.bytes, again.bytes, 16) == 0);
+  const ss_material bad_material = {-1.0, 0.3, 0.01, 2700.0};
+  CHECK_STATUS(ss_session_upload(session, mesh, &bad_material, NULL, &again, NULL), SS_UNPROCESSABLE);
+
+  /* Pick with a ray from the hand. */
+  ss_evaluator* ev = NULL;
+  CHECK_OK(ss_evaluator_create(mesh, &ev));
+  ss_tessellation* surface = NULL;
+  CHECK_OK(ss_tessellation_create(ev, 3, &surface));
+  ss_picker* picker = NULL;
+  CHECK_OK(ss_picker_create(surface, &picker));
+  const ss_pose hand = {{0.63, 0.81, 1.0}, {0, 0, 0, 1}};
+  const ss_ray ray = {hand.position, {0.05, -0.1, -1.0}, 0.0, INFINITY};
+  ss_pick pick;
+  int32_t hit = 0;
+  CHECK_OK(ss_picker_pick(picker, &ray, 1, &pick, &hit));
+  CHECK(hit == 1 && pick.status == SS_REFINE_CONVERGED);
+
+  /* Grab it and lift the hand by 3 cm. */
+  ss_grab* grab = NULL;
+  CHECK_OK(ss_grab_begin(ev, &pick.point, NULL, 0, &hand, NULL, &grab));
+  const ss_pose lifted = {{0.63, 0.81, 1.03}, {0, 0, 0, 1}};
+  ss_vec3 target;
+  CHECK_OK(ss_grab_target(grab, &lifted, &target));
+  ss_request* request = NULL;
+  CHECK_OK(ss_request_create(&request));
+  clamp(request);
+  CHECK_OK(ss_request_add_grab(request, grab, &lifted));
+
+  /* Deform asynchronously; the game loop polls. */
+  ss_deformation* op = NULL;
+  CHECK_OK(ss_session_deform_begin(session, &id, request, &op));
+  int polls = 0;
+  CHECK(wait_for(op, &polls));
+  uint32_t res_id = 0;
+  int32_t count = 0;
+  CHECK_OK(ss_deformation_read(op, &res_id, NULL, 0, &count));
+  CHECK(count == NV);
+  double deformed[3 * NV];
+  CHECK_OK(ss_deformation_read(op, &res_id, deformed, NV, &count));
+  CHECK(res_id == 1);
+  ss_deformation_destroy(op);
+
+  /* The deformed limit surface at the picked point is where the hand put it. */
+  ss_limit_sample s;
+  CHECK_OK(ss_evaluator_evaluate(ev, &pick.point, deformed, NV, &s));
+  const double miss = sqrt((s.position.x - target.x) * (s.position.x - target.x) +
+                           (s.position.y - target.y) * (s.position.y - target.y) +
+                           (s.position.z - target.z) * (s.position.z - target.z));
+  CHECK(miss < 1e-9);
+  CHECK(fabs(target.z - pick.position.z - 0.03) < 1e-12);
+  /* The clamped control points did not move. */
+  double xyz[3 * NV];
+  CHECK_OK(ss_mesh_positions(mesh, xyz, NV, &count));
+  double clamp_motion = 0.0;
+  for (int k = 0; k < 3 * 2 * (N + 1); ++k) clamp_motion = fmax(clamp_motion, fabs(deformed[k] - xyz[k]));
+  CHECK(clamp_motion < 1e-12);
+
+  /* The rendered surface and the picker follow the deformation. */
+  CHECK_OK(ss_tessellation_update(surface, deformed, NV));
+  CHECK_OK(ss_picker_refit(picker));
+  ss_pick after;
+  CHECK_OK(ss_picker_pick(picker, &ray, 1, &after, &hit));
+  CHECK(hit == 1 && after.t < pick.t);
+
+  /* Blocking deform, latest result. */
+  CHECK_OK(ss_session_deform(session, &id, request, &res_id, deformed, NV, &count));
+  CHECK(res_id == 2);
+  int32_t has_new = 0;
+  CHECK_OK(ss_session_latest_result(session, &id, 0, 0, &has_new, &res_id, deformed, NV, &count));
+  CHECK(has_new == 1 && res_id == 2);
+  CHECK_OK(ss_session_latest_result(session, &id, 2, 0, &has_new, &res_id, deformed, NV, &count));
+  CHECK(has_new == 0);
+
+  /* A request that leaves the plate free to move: the server's error comes back as a status. */
+  ss_request* free_plate = NULL;
+  CHECK_OK(ss_request_create(&free_plate));
+  const ss_vec3 down = {0, 0, -10};
+  CHECK_OK(ss_request_add_force(free_plate, 20, &down));
+  CHECK_OK(ss_session_deform_begin(session, &id, free_plate, &op));
+  CHECK(wait_for(op, &polls));
+  CHECK_STATUS(ss_deformation_read(op, &res_id, deformed, NV, &count), SS_UNPROCESSABLE);
+  CHECK(strlen(ss_last_error_message()) > 0);
+  ss_deformation_destroy(op);
+  /* An index the mesh does not have. */
+  CHECK_OK(ss_request_add_force(free_plate, NV + 5, &down));
+  CHECK_STATUS(ss_session_deform(session, &id, free_plate, &res_id, deformed, NV, &count), SS_INVALID_ARGUMENT);
+  /* An unknown geometry. */
+  ss_geom_id unknown;
+  memset(&unknown, 7, sizeof unknown);
+  CHECK_STATUS(ss_session_deform(session, &unknown, request, &res_id, deformed, NV, &count), SS_NOT_FOUND);
+
+  /* The same through HTTP: a second in-process server with a listener, and a remote session. */
+  ss_embedded_options listening;
+  ss_embedded_options_default(&listening);
+  listening.http_host = "127.0.0.1";
+  ss_session* host = NULL;
+  CHECK_OK(ss_session_create_embedded(&listening, &host));
+  int32_t port = 0;
+  CHECK_OK(ss_session_embedded_port(host, &port));
+  CHECK(port > 0);
+  char url[64];
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", (int)port);
+  ss_session* remote = NULL;
+  CHECK_OK(ss_session_create_remote(url, NULL, &remote));
+  if (remote) {
+    CHECK_OK(ss_session_upload(remote, mesh, &material, "c-test", &again, &created));
+    CHECK(created == 1 && memcmp(id.bytes, again.bytes, 16) == 0); /* same content, same id */
+    CHECK_OK(ss_session_deform_begin(remote, &again, request, &op));
+    CHECK(wait_for(op, &polls));
+    CHECK_OK(ss_deformation_read(op, &res_id, deformed, NV, &count));
+    ss_deformation_destroy(op);
+    CHECK_OK(ss_evaluator_evaluate(ev, &pick.point, deformed, NV, &s));
+    CHECK(fabs(s.position.x - target.x) + fabs(s.position.y - target.y) + fabs(s.position.z - target.z) < 1e-9);
+  }
+  ss_session_destroy(remote);
+  ss_session_destroy(host);
+  CHECK_STATUS(ss_session_embedded_port(session, NULL), SS_INVALID_ARGUMENT);
+  ss_session* nowhere = NULL;
+  ss_remote_options quick;
+  ss_remote_options_default(&quick);
+  quick.connect_timeout_ms = 500;
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", (int)port); /* the listener is closed now */
+  CHECK_STATUS(ss_session_create_remote(url, &quick, &nowhere), SS_UNAVAILABLE);
+  CHECK(nowhere == NULL);
+
+  /* Releasing a running operation and the session never blocks. */
+  CHECK_OK(ss_session_deform_begin(session, &id, request, &op));
+  ss_deformation_destroy(op);
+
+  ss_request_destroy(free_plate);
+  ss_request_destroy(request);
+  ss_grab_destroy(grab);
+  ss_picker_destroy(picker);
+  ss_tessellation_destroy(surface);
+  ss_evaluator_destroy(ev);
+  ss_mesh_destroy(mesh);
+  ss_session_destroy(session);
+  printf("c_api_session_test: %d checks, %d failures\n", g_checks, g_failures);
+  return g_failures == 0 ? 0 : 1;
+}
