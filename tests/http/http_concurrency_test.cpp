@@ -131,6 +131,35 @@ TEST(HttpConcurrencyTest, HundredsOfLongPollsDoNotStarveSolves) {
   for (int w = 0; w < kWaiters; ++w) EXPECT_EQ(status[w], 200) << "waiter " << w;
 }
 
+TEST(HttpConcurrencyTest, IdleConnectionThreadsExitAfterABurst) {
+  http::ServerOptions ho = test_server_options();
+  ho.idle_thread_exit = Ms(200);
+  TestServer server(test_service_options(), ho);
+  const GeomId id = upload_ready(server);
+  const std::string base = "/geometries/" + id.hex();
+  constexpr int kBurst = 40;
+  std::vector<std::thread> waiters;
+  for (int w = 0; w < kBurst; ++w) {
+    waiters.emplace_back([&] {
+      auto c = server.client(60);
+      c->set_keep_alive(false);
+      EXPECT_EQ(get(*c, base + "/latest_result?wait=30").status, 200);
+    });
+  }
+  while (server.http().waiting_long_polls() < kBurst) std::this_thread::sleep_for(Ms(1));
+  EXPECT_GE(server.http().connection_threads(), kBurst);
+  EXPECT_TRUE(server.service().deform(id, pinned_push(1)).get());
+  for (auto& t : waiters) t.join();
+  // Idle threads leave; a few are kept. The server still serves (and reaps on the next accept).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  while (server.http().connection_threads() > 8 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(Ms(20));
+  }
+  EXPECT_LE(server.http().connection_threads(), 8);
+  EXPECT_EQ(get(*server.client(), "/health").status, 200);
+  EXPECT_NE(get(*server.client(), "/metrics").body.find("softshell_http_connection_threads"), std::string::npos);
+}
+
 TEST(HttpConcurrencyTest, LongPollsBeyondTheLimitGet503) {
   http::ServerOptions ho = test_server_options();
   ho.max_connections = 16;

@@ -1,5 +1,6 @@
 #include "softshell/http/server.h"
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <condition_variable>
@@ -69,18 +70,27 @@ struct RequestContext {
 thread_local RequestContext t_request;
 
 // ---------------------------------------------------------------------------------------------
-// Connection threads: one per open connection, created on demand up to a maximum, kept for reuse.
+// Connection threads: one per open connection, created on demand up to a maximum and kept for
+// reuse; a thread idle for `idle_exit` exits (down to kKeep threads), so a burst of clients does not
+// leave hundreds of idle threads behind.
 
 class ConnectionThreads final : public httplib::TaskQueue {
  public:
-  ConnectionThreads(size_t max_threads, std::atomic<int>& busy) : max_(std::max<size_t>(1, max_threads)), busy_(busy) {}
+  static constexpr size_t kKeep = 8;
+
+  ConnectionThreads(size_t max_threads, std::chrono::milliseconds idle_exit, std::atomic<int>& busy,
+                    std::atomic<int>& live)
+      : max_(std::max<size_t>(1, max_threads)), idle_exit_(idle_exit), busy_(busy), live_count_(live) {}
   ~ConnectionThreads() override { shutdown(); }
 
   void enqueue(std::function<void()> fn) override {
     std::lock_guard lock(mu_);
+    reap_locked();
     jobs_.push_back(std::move(fn));
     // Every idle thread takes one job; jobs beyond them get a new thread while allowed.
-    if (jobs_.size() > idle_ && threads_.size() < max_) {
+    if (jobs_.size() > idle_ && live_ < max_) {
+      ++live_;
+      live_count_.store(static_cast<int>(live_));
       threads_.emplace_back([this] { work(); });
     } else {
       cv_.notify_one();
@@ -93,6 +103,7 @@ class ConnectionThreads final : public httplib::TaskQueue {
       std::lock_guard lock(mu_);
       stopping_ = true;
       threads.swap(threads_);
+      exited_.clear();
     }
     cv_.notify_all();
     for (auto& t : threads) t.join();
@@ -103,9 +114,18 @@ class ConnectionThreads final : public httplib::TaskQueue {
     std::unique_lock lock(mu_);
     for (;;) {
       ++idle_;
-      cv_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
+      const bool woken = cv_.wait_for(lock, idle_exit_, [&] { return stopping_ || !jobs_.empty(); });
       --idle_;
-      if (jobs_.empty()) return;  // stopping and nothing left
+      if (!woken && live_ > kKeep) {  // idle for long: leave (joined by a later enqueue)
+        --live_;
+        live_count_.store(static_cast<int>(live_));
+        exited_.push_back(std::this_thread::get_id());
+        return;
+      }
+      if (jobs_.empty()) {
+        if (stopping_) return;
+        continue;
+      }
       auto fn = std::move(jobs_.front());
       jobs_.pop_front();
       lock.unlock();
@@ -116,12 +136,29 @@ class ConnectionThreads final : public httplib::TaskQueue {
     }
   }
 
+  // Joins threads that left for idleness (they gave up the lock for good before their id became
+  // visible here, so these joins return at once).
+  void reap_locked() {
+    for (const auto id : exited_) {
+      auto it = std::find_if(threads_.begin(), threads_.end(), [&](const std::thread& t) { return t.get_id() == id; });
+      if (it != threads_.end()) {
+        it->join();
+        threads_.erase(it);
+      }
+    }
+    exited_.clear();
+  }
+
   const size_t max_;
+  const std::chrono::milliseconds idle_exit_;
   std::atomic<int>& busy_;
+  std::atomic<int>& live_count_;
   std::mutex mu_;
   std::condition_variable cv_;
   std::deque<std::function<void()>> jobs_;
-  std::vector<std::thread> threads_;
+  std::vector<std::thread> threads_;     // every thread not joined yet
+  std::vector<std::thread::id> exited_;  // threads that left for idleness, to join
+  size_t live_ = 0;                      // threads running work()
   size_t idle_ = 0;
   bool stopping_ = false;
 };
@@ -199,7 +236,10 @@ struct HttpServer::Impl {
 
   // --- wiring --------------------------------------------------------------------------------
   void configure() {
-    server.new_task_queue = [this] { return new ConnectionThreads(static_cast<size_t>(options.max_connections), busy); };
+    server.new_task_queue = [this] {
+      return new ConnectionThreads(static_cast<size_t>(options.max_connections), options.idle_thread_exit, busy,
+                                   connection_threads);
+    };
     server.set_payload_max_length(options.max_body_bytes);
     server.set_keep_alive_max_count(1u << 20);
     server.set_keep_alive_timeout(options.keep_alive_timeout.count());
@@ -569,6 +609,8 @@ struct HttpServer::Impl {
     }
     m.family("softshell_http_connections_busy", "gauge", "Connections being served (one I/O thread each).");
     m.sample("softshell_http_connections_busy", "", busy.load());
+    m.family("softshell_http_connection_threads", "gauge", "I/O threads alive (busy or idle).");
+    m.sample("softshell_http_connection_threads", "", connection_threads.load());
     m.family("softshell_http_long_polls_waiting", "gauge", "latest_result requests waiting for a newer result.");
     m.sample("softshell_http_long_polls_waiting", "", long_polls.load());
 
@@ -623,7 +665,7 @@ struct HttpServer::Impl {
   std::atomic<int> port{0};
   std::atomic<bool> started{false}, stopped{false};
 
-  std::atomic<int> busy{0}, long_polls{0};
+  std::atomic<int> busy{0}, long_polls{0}, connection_threads{0};
   std::array<EndpointCounters, static_cast<size_t>(Endpoint::kCount)> counters;
 };
 
@@ -669,6 +711,7 @@ int HttpServer::port() const { return impl_->port.load(); }
 bool HttpServer::running() const { return impl_->started.load() && !impl_->stopped.load(); }
 std::string HttpServer::metrics_text() const { return impl_->metrics_text(); }
 int HttpServer::busy_connections() const { return impl_->busy.load(); }
+int HttpServer::connection_threads() const { return impl_->connection_threads.load(); }
 int HttpServer::waiting_long_polls() const { return impl_->long_polls.load(); }
 const ServerOptions& HttpServer::options() const { return impl_->options; }
 service::Service& HttpServer::service() const { return *impl_->service; }

@@ -41,6 +41,9 @@ struct ServerOptions {
   std::chrono::seconds keep_alive_timeout{5};
   /// Time allowed to receive a request and to send a response.
   std::chrono::seconds io_timeout{30};
+  /// An I/O thread idle this long exits (at least 8 are kept), so a burst of clients leaves no
+  /// crowd of idle threads behind.
+  std::chrono::milliseconds idle_thread_exit{30000};
   /// `latest_result`'s `wait` default and upper bound (PROTOCOL.md: 25 and 60 seconds).
   double default_wait_seconds = 25.0;
   double max_wait_seconds = 60.0;
@@ -84,8 +87,10 @@ class HttpServer {
   std::string metrics_text() const;
   /// Counters per endpoint.
   std::vector<EndpointStats> endpoint_stats() const;
-  /// Connections (I/O threads) busy right now, and long polls waiting right now.
+  /// Connections (I/O threads) busy right now, I/O threads alive (busy or idle), and long polls
+  /// waiting right now.
   int busy_connections() const;
+  int connection_threads() const;
   int waiting_long_polls() const;
 
   const ServerOptions& options() const;
