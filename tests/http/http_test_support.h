@@ -64,6 +64,7 @@ class TestServer {
     c->set_read_timeout(read_timeout_s, 0);
     c->set_connection_timeout(20, 0);
     c->set_keep_alive(true);
+    c->set_tcp_nodelay(true);  // headers and body go out at once (no Nagle / delayed-ACK stall)
     return c;
   }
 
