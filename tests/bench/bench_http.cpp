@@ -179,7 +179,11 @@ int main(int argc, char** argv) {
         for (int i = 0; i < each; ++i) {
           const auto t = bench::Clock::now();
           auto res = c->Post(path, headers(kBin), wire::encode_request_binary(grab(spot, rng)).value(), kBin);
-          if (res && res->status == 200) latency[static_cast<size_t>(k)].push_back(bench::ms_since(t));
+          if (res && res->status == 200) {
+            latency[static_cast<size_t>(k)].push_back(bench::ms_since(t));
+          } else {
+            std::fprintf(stderr, "client %d: %s\n", k, res ? res->body.c_str() : httplib::to_string(res.error()).c_str());
+          }
         }
       });
     }

@@ -21,7 +21,6 @@ namespace softshell::test {
 
 inline service::ServiceOptions test_service_options() {
   service::ServiceOptions o;
-  o.solve_threads = 2;
   o.precompute_threads = 1;
   o.store_bytes = size_t{512} << 20;
   o.cache_bytes = size_t{64} << 20;

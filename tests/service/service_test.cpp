@@ -22,7 +22,6 @@ using std::chrono::milliseconds;
 
 ServiceOptions small_options() {
   ServiceOptions o;
-  o.solve_threads = 2;
   o.precompute_threads = 1;
   o.store_bytes = size_t{256} << 20;
   o.cache_bytes = size_t{64} << 20;
@@ -397,6 +396,57 @@ TEST(ServiceTest, ConcurrentDeformationsGetContiguousIdsAndWaitersSeeTheNewest) 
       EXPECT_LT((again->positions[i] - stored->positions[i]).norm(), 1e-12);
     }
   }
+}
+
+// Concurrent requests must give exactly what the same requests give one at a time. (With
+// solve_threads > 1 and Debian's serial OpenBLAS this fails: the BLAS is not thread-safe.)
+TEST(ServiceTest, ConcurrentSolvesMatchSequentialOnes) {
+  ServiceOptions o = small_options();
+  o.solve_threads = ServiceOptions{}.solve_threads;  // the default
+  Service s(o);
+  constexpr int n = 16;
+  const ControlMesh mesh = test::make_grid(n, n);  // large enough for CHOLMOD's BLAS-based solves
+  const GeomId id = upload_ready(s, mesh);
+  auto evaluator = LimitEvaluator::create(mesh).value();
+  // A cantilever: the column x = 0 clamped; each request grabs another point.
+  DeformationRequest base;
+  for (int j = 0; j <= n; ++j) base.vertex_constraints.push_back({test::grid_index(n, 0, j), kAxisAll, Vec3::Zero()});
+  std::vector<DeformationRequest> requests;
+  for (int k = 0; k < 24; ++k) {
+    const int32_t face = test::grid_index(n - 1, 3 + k % (n - 4), (5 * k) % n);  // faces away from x = 0
+    const LimitStencil st = evaluator.stencil({face, 0, 0.5, 0.5});
+    DeformationRequest r = base;
+    LagrangeConstraint c;
+    c.indices = st.indices;
+    for (double w : st.position) c.coefficients.push_back(Vec3(w, w, w));
+    c.values = Vec3(0.0, 0.01, 0.005 * (1 + k % 3));
+    r.lagrange_constraints.push_back(c);
+    requests.push_back(r);
+  }
+  std::vector<std::vector<Vec3>> expected;
+  for (const auto& r : requests) expected.push_back(s.deform(id, r).get().value()->positions);
+  std::atomic<int> wrong{0}, failed{0};
+  std::vector<std::thread> clients;
+  for (int t = 0; t < 6; ++t) {
+    clients.emplace_back([&, t] {
+      for (size_t i = static_cast<size_t>(t); i < requests.size(); i += 2) {
+        auto r = s.deform(id, requests[i]).get();
+        if (!r) {
+          failed.fetch_add(1);
+          continue;
+        }
+        for (size_t v = 0; v < expected[i].size(); ++v) {
+          if (((*r)->positions[v] - expected[i][v]).norm() > 1e-12) {
+            wrong.fetch_add(1);
+            break;
+          }
+        }
+      }
+    });
+  }
+  for (auto& c : clients) c.join();
+  EXPECT_EQ(failed.load(), 0);
+  EXPECT_EQ(wrong.load(), 0);
 }
 
 TEST(ServiceTest, StoreBudgetRefusesWithoutDroppingAnything) {

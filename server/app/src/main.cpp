@@ -25,8 +25,9 @@ geometry shares its results.
 options:
   --host HOST          address to listen on (default 127.0.0.1; 0.0.0.0 for every interface)
   --port PORT          TCP port (default 8080; 0 picks a free port, printed at start)
-  --threads N          worker threads for solves and for each precomputation
-                       (default: the number of cores)
+  --threads N          threads of each precomputation (default: the number of cores)
+  --solve-threads N    solves running at once (default 1: Debian's serial OpenBLAS, which
+                       CHOLMOD calls, is not thread-safe; raise it with a thread-safe BLAS)
   --precompute-jobs N  geometries precomputed at the same time (default 1)
   --cache-mb M         memory budget of the factorization cache in MiB (default 1024);
                        least recently used factors are evicted to stay under it
@@ -83,6 +84,8 @@ int main(int argc, char** argv) {
       port = static_cast<int>(integer_arg(arg, value(), 0, 65535));
     } else if (arg == "--threads") {
       threads = static_cast<int>(integer_arg(arg, value(), 1, 4096));
+    } else if (arg == "--solve-threads") {
+      service_options.solve_threads = static_cast<int>(integer_arg(arg, value(), 1, 4096));
     } else if (arg == "--precompute-jobs") {
       service_options.precompute_jobs = static_cast<int>(integer_arg(arg, value(), 1, 256));
     } else if (arg == "--cache-mb") {
@@ -101,7 +104,6 @@ int main(int argc, char** argv) {
       usage_error("unknown option '" + arg + "'");
     }
   }
-  service_options.solve_threads = threads;
   service_options.precompute_threads = threads;
   const service::Logger logger{level, service::stderr_log_sink()};
   service_options.logger = logger;
