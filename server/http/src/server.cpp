@@ -218,7 +218,7 @@ class JsonGate {
 struct EndpointCounters {
   std::atomic<uint64_t> requests{0}, client_errors{0}, server_errors{0};
   Histogram latency;
-  std::mutex status_mu;
+  mutable std::mutex status_mu;
   std::map<int, uint64_t> by_status;
 };
 
@@ -591,7 +591,7 @@ struct HttpServer::Impl {
     PrometheusText m;
     m.family("softshell_http_requests_total", "counter", "HTTP requests answered, by endpoint and status.");
     for (size_t e = 0; e < counters.size(); ++e) {
-      auto& c = const_cast<EndpointCounters&>(counters[e]);
+      const auto& c = counters[e];
       std::lock_guard lock(c.status_mu);
       for (const auto& [status, n] : c.by_status) {
         m.sample("softshell_http_requests_total",
