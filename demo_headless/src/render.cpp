@@ -28,7 +28,8 @@ Camera Camera::framing(const Vec3& lo, const Vec3& hi, const Vec3& from, const V
   Camera c;
   c.target = 0.5 * (lo + hi);
   const double radius = 0.5 * (hi - lo).norm();
-  const double distance = radius / std::sin(0.5 * c.fov_deg * 3.14159265358979 / 180.0) * 1.05;
+  // The bounding sphere just fits the view (a little tighter: boxes are not spheres).
+  const double distance = 0.85 * radius / std::tan(0.5 * c.fov_deg * 3.14159265358979 / 180.0);
   c.eye = c.target + distance * from.normalized();
   c.up = up;
   return c;

@@ -40,17 +40,18 @@ Result<void> Material::check() const {
 const std::vector<MaterialPreset>& material_presets() {
   // Typical room-temperature values (E in Pa, density in kg/m^3); thickness is set by the caller.
   static const std::vector<MaterialPreset> presets = {
-      {"aluminium", {6.9e10, 0.33, 0.001, 2700}, "aluminium alloy sheet"},
-      {"steel", {2.0e11, 0.30, 0.001, 7850}, "structural steel"},
-      {"copper", {1.17e11, 0.34, 0.001, 8960}, "copper sheet"},
-      {"titanium", {1.1e11, 0.34, 0.001, 4500}, "titanium alloy"},
-      {"glass", {7.0e10, 0.22, 0.001, 2500}, "soda-lime glass (brittle: the linear model ends at fracture)"},
-      {"abs", {2.3e9, 0.35, 0.001, 1050}, "ABS plastic"},
-      {"polycarbonate", {2.4e9, 0.37, 0.001, 1200}, "polycarbonate plastic"},
-      {"wood", {1.1e10, 0.30, 0.001, 600}, "wood veneer (isotropic approximation)"},
-      {"cardboard", {3.0e9, 0.30, 0.001, 700}, "paperboard (isotropic approximation)"},
-      {"rubber", {5.0e6, 0.49, 0.001, 1100}, "natural rubber (small-strain modulus)"},
-      {"silicone", {1.0e6, 0.49, 0.001, 1100}, "soft silicone (small-strain modulus)"},
+      // name, {E, nu, t, rho}, description, yield (or tensile) strength
+      {"aluminium", {6.9e10, 0.33, 0.001, 2700}, "aluminium alloy sheet (6061-T6)", 2.76e8},
+      {"steel", {2.0e11, 0.30, 0.001, 7850}, "structural steel (S235)", 2.35e8},
+      {"copper", {1.17e11, 0.34, 0.001, 8960}, "copper sheet (annealed)", 7.0e7},
+      {"titanium", {1.1e11, 0.34, 0.001, 4500}, "titanium alloy (Ti-6Al-4V)", 8.8e8},
+      {"glass", {7.0e10, 0.22, 0.001, 2500}, "soda-lime glass (brittle: the linear model ends at fracture)", 4.0e7},
+      {"abs", {2.3e9, 0.35, 0.001, 1050}, "ABS plastic", 4.0e7},
+      {"polycarbonate", {2.4e9, 0.37, 0.001, 1200}, "polycarbonate plastic", 6.0e7},
+      {"wood", {1.1e10, 0.30, 0.001, 600}, "wood veneer (isotropic approximation)", 4.0e7},
+      {"cardboard", {3.0e9, 0.30, 0.001, 700}, "paperboard (isotropic approximation)", 1.0e7},
+      {"rubber", {5.0e6, 0.49, 0.001, 1100}, "natural rubber (small-strain modulus)", 1.5e7},
+      {"silicone", {1.0e6, 0.49, 0.001, 1100}, "soft silicone (small-strain modulus)", 5.0e6},
   };
   return presets;
 }

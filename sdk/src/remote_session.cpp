@@ -82,6 +82,7 @@ struct RemoteSession::Impl {
                    "'" + url + "' is not a server URL (expected http://host:port or host:port)"};
     }
     c->set_keep_alive(true);
+    c->set_tcp_nodelay(true);
     c->set_connection_timeout(options.connect_timeout);
     c->set_write_timeout(options.request_timeout);
     c->set_decompress(options.compress);

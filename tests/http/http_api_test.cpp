@@ -26,7 +26,7 @@ std::string upload_ready(TestServer& server, const std::string& body = geometry_
   Reply r = post(*c, "/geometries" + query, body, type, kJson);
   EXPECT_TRUE(r.status == 201 || r.status == 200) << r.status << " " << r.body;
   auto up = wire::decode_upload_response_json(r.body, r.status == 201).value();
-  server.service().wait_until_precomputed(up.id, std::chrono::seconds(30));
+  (void)server.service().wait_until_precomputed(up.id, std::chrono::seconds(30));
   return up.id.hex();
 }
 

@@ -17,7 +17,7 @@ using namespace test;
 GeomId upload_ready(TestServer& server) {
   auto up = server.service().upload(exact_grid(), exact_material());
   EXPECT_TRUE(up);
-  server.service().wait_until_precomputed(up->id, std::chrono::seconds(30));
+  (void)server.service().wait_until_precomputed(up->id, std::chrono::seconds(30));
   return up->id;
 }
 

@@ -207,6 +207,22 @@ TEST(HttpHostileTest, BodiesOverTheLimitGet413) {
   EXPECT_EQ(post(*server.client(), "/geometries", std::string(1 << 20, '\0'), kBin).status, 400);
 }
 
+TEST(HttpHostileTest, CompressedBodiesAreRefusedBeforeTheyAreInflated) {
+  TestServer server;
+  auto c = server.client();
+  c->set_compress(true);  // gzip the request body (Content-Encoding: gzip)
+  const std::string zeros(8 << 20, '\0');  // inflates from a few kB
+  auto r = c->Post("/geometries", zeros, kBin);
+  ASSERT_TRUE(r) << httplib::to_string(r.error());
+  EXPECT_EQ(r->status, 415);
+  EXPECT_NE(r->body.find("uncompressed"), std::string::npos) << r->body;
+  // The same client goes on (over a new connection) and the server is healthy.
+  c->set_compress(false);
+  EXPECT_EQ(get(*c, "/health").status, 200);
+  EXPECT_EQ(post(*c, "/geometries", wire::encode_geometry_binary(exact_grid(), exact_material()).value(), kBin).status,
+            201);
+}
+
 TEST(HttpHostileTest, ManyJsonDecodesAtOnceAreBounded) {
   http::ServerOptions options = test_server_options();
   options.max_json_decode_bytes = 64;  // smaller than any upload: every JSON decode is refused

@@ -36,6 +36,7 @@ struct MaterialPreset {
   std::string name;
   Material material;
   std::string description;
+  double yield_strength = 0.0;  ///< Pa: above it the linear elastic model no longer holds
 };
 
 /// All presets: aluminium, steel, copper, titanium, glass, abs, polycarbonate, wood, cardboard,

@@ -206,10 +206,29 @@ struct HttpServer::Impl {
     server.set_read_timeout(options.io_timeout.count());
     server.set_write_timeout(options.io_timeout.count());
     server.set_tcp_nodelay(true);
+    // cpp-httplib's default also sets SO_REUSEPORT, which lets a second server bind the same port
+    // and silently take half of the connections (and so half of the geometries' clients). Only
+    // SO_REUSEADDR (a quick restart over TIME_WAIT connections) is wanted: a busy port is an error.
+    server.set_socket_options([](socket_t sock) {
+      int yes = 1;
+      ::setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+    });
 
     server.set_pre_routing_handler(
-        httplib::Server::HandlerWithResponse([](const httplib::Request&, httplib::Response&) {
+        httplib::Server::HandlerWithResponse([](const httplib::Request& req, httplib::Response& res) {
           t_request = RequestContext{Clock::now(), Endpoint::kUnmatched, true};
+          // cpp-httplib inflates compressed request bodies without bounding the inflated size
+          // (--max-body-mb limits only the compressed bytes): a small gzip bomb could take all
+          // memory. Compressed bodies are refused before they are read; the connection is closed
+          // because its unread body cannot be skipped.
+          const std::string encoding = req.get_header_value("Content-Encoding");
+          if (!encoding.empty() && encoding != "identity") {
+            set_error(res, Error{ErrorCode::kUnsupportedMediaType,
+                                 "compressed request bodies (Content-Encoding: " + encoding.substr(0, 40) +
+                                     ") are not accepted; send the body uncompressed"});
+            res.set_header("Connection", "close");
+            return httplib::Server::HandlerResponse::Handled;
+          }
           return httplib::Server::HandlerResponse::Unhandled;
         }));
     server.set_error_handler(httplib::Server::HandlerWithResponse(

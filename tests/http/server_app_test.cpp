@@ -1,0 +1,156 @@
+// The softshell-server executable: options, the "listening" line, serving, clean stop on signals.
+#include <gtest/gtest.h>
+
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <string>
+#include <vector>
+
+#include "http_test_support.h"
+
+namespace softshell {
+namespace {
+
+using namespace test;
+
+// A child process with its stdout and stderr captured.
+class Child {
+ public:
+  explicit Child(std::vector<std::string> args) {
+    int out[2], err[2];
+    if (pipe(out) != 0 || pipe(err) != 0) throw std::runtime_error("pipe failed");
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(out[1], 1);
+      dup2(err[1], 2);
+      close(out[0]);
+      close(err[0]);
+      std::vector<char*> argv;
+      for (auto& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execv(argv[0], argv.data());
+      _exit(127);
+    }
+    close(out[1]);
+    close(err[1]);
+    out_ = out[0];
+    err_ = err[0];
+  }
+  ~Child() {
+    if (pid_ > 0 && !exited_) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+    close(out_);
+    close(err_);
+  }
+
+  // Reads stdout until `needle` appeared or the timeout passed; returns what was read.
+  std::string read_until(const std::string& needle, std::chrono::seconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (stdout_.find(needle) == std::string::npos && std::chrono::steady_clock::now() < deadline) {
+      pollfd p{out_, POLLIN, 0};
+      if (poll(&p, 1, 100) > 0) {
+        char buf[512];
+        const ssize_t n = read(out_, buf, sizeof buf);
+        if (n <= 0) break;
+        stdout_.append(buf, static_cast<size_t>(n));
+      }
+    }
+    return stdout_;
+  }
+  std::string drain_stderr() {
+    std::string all;
+    char buf[4096];
+    fcntl(err_, F_SETFL, O_NONBLOCK);
+    for (ssize_t n; (n = read(err_, buf, sizeof buf)) > 0;) all.append(buf, static_cast<size_t>(n));
+    return all;
+  }
+  // Waits for the exit; returns the exit status or -1 on timeout.
+  int wait(std::chrono::seconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+      int status = 0;
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        exited_ = true;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+      }
+      usleep(10000);
+    }
+    return -1;
+  }
+  pid_t pid() const { return pid_; }
+
+ private:
+  pid_t pid_ = -1;
+  int out_ = -1, err_ = -1;
+  bool exited_ = false;
+  std::string stdout_;
+};
+
+int port_of(const std::string& line) {
+  const auto colon = line.rfind(':');
+  return colon == std::string::npos ? 0 : std::atoi(line.c_str() + colon + 1);
+}
+
+TEST(ServerAppTest, ServesAndStopsCleanlyOnSignals) {
+  for (int sig : {SIGTERM, SIGINT}) {
+    Child server({SOFTSHELL_SERVER_EXE, "--host", "127.0.0.1", "--port", "0", "--threads", "1", "--cache-mb", "64",
+                  "--store-mb", "256", "--max-body-mb", "1", "--log-level", "info"});
+    const std::string out = server.read_until("\n", std::chrono::seconds(30));
+    ASSERT_NE(out.find("softshell-server listening on http://127.0.0.1:"), std::string::npos) << out;
+    const int port = port_of(out.substr(0, out.find('\n')));
+    ASSERT_GT(port, 0);
+    {
+      httplib::Client c("127.0.0.1", port);
+      auto health = c.Get("/health");
+      ASSERT_TRUE(health);
+      EXPECT_EQ(health->status, 200);
+      // --max-body-mb 1
+      auto big = c.Post("/geometries", std::string((1 << 20) + 10, 'x'), kBin);
+      ASSERT_TRUE(big);
+      EXPECT_EQ(big->status, 413);
+      auto up = c.Post("/geometries", wire::encode_geometry_binary(exact_grid(), exact_material()).value(), kBin);
+      ASSERT_TRUE(up);
+      EXPECT_EQ(up->status, 201);
+    }
+    kill(server.pid(), sig);
+    EXPECT_EQ(server.wait(std::chrono::seconds(15)), 0) << "signal " << sig;
+    const std::string log = server.drain_stderr();
+    // One line per request: method, path, status, microseconds.
+    EXPECT_NE(log.find("GET /health 200 "), std::string::npos) << log;
+    EXPECT_NE(log.find("POST /geometries 201 "), std::string::npos) << log;
+    EXPECT_NE(log.find("POST /geometries 413 "), std::string::npos) << log;
+    EXPECT_NE(log.find("us\n"), std::string::npos) << log;
+    EXPECT_NE(log.find("stopped"), std::string::npos) << log;
+  }
+}
+
+TEST(ServerAppTest, HelpAndBadOptions) {
+  Child help({SOFTSHELL_SERVER_EXE, "--help"});
+  const std::string text = help.read_until("--log-level", std::chrono::seconds(10));
+  EXPECT_EQ(help.wait(std::chrono::seconds(10)), 0);
+  for (const char* option : {"--host", "--port", "--threads", "--cache-mb", "--max-body-mb", "--log-level"}) {
+    EXPECT_NE(text.find(option), std::string::npos) << option;
+  }
+  Child bad({SOFTSHELL_SERVER_EXE, "--port", "99999"});
+  EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
+  EXPECT_NE(bad.drain_stderr().find("--port"), std::string::npos);
+  Child unknown({SOFTSHELL_SERVER_EXE, "--frobnicate"});
+  EXPECT_EQ(unknown.wait(std::chrono::seconds(10)), 2);
+}
+
+TEST(ServerAppTest, BusyPortIsAnError) {
+  TestServer taken;
+  Child server({SOFTSHELL_SERVER_EXE, "--host", "127.0.0.1", "--port", std::to_string(taken.port())});
+  EXPECT_EQ(server.wait(std::chrono::seconds(15)), 1);
+  EXPECT_NE(server.drain_stderr().find("cannot listen"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace softshell
