@@ -52,6 +52,10 @@ enum class ForceTransfer : uint8_t {
 ///  - faces: coarse face F (sub-face k) covers 4^levels (4^(levels-1) per sub-face) fine quads;
 ///    `fine_point` / `coarse_point` map a surface point between the levels exactly.
 ///
+/// With BoundaryMode::kNone only the fine faces that touch the boundary are ghosts, so the fine
+/// limit surface also covers the inner part of the coarse ghost ring (the coarse surface is the
+/// same part of it as before).
+///
 /// Immutable after `create`. Thread-safety: every member function may be called concurrently.
 class MeshRefinement {
  public:
