@@ -8,7 +8,8 @@
 #   ./build.sh deps                  only install the Debian packages
 #
 # Environment: BUILD_DIR (default: build), BUILD_TYPE (default: RelWithDebInfo), JOBS (default:
-# the number of cores), CMAKE_ARGS (extra cmake arguments), SOFTSHELL_NO_APT=1 to skip apt-get.
+# the number of cores), CMAKE_ARGS (extra cmake arguments), TARGETS (build only these targets,
+# space-separated; default all), SOFTSHELL_NO_APT=1 to skip apt-get.
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -16,7 +17,7 @@ PACKAGES=(
   g++ cmake ninja-build pkg-config git ca-certificates
   libeigen3-dev libosd-dev libsuitesparse-dev libbullet-dev
   libcpp-httplib-dev nlohmann-json3-dev libssl-dev libstb-dev
-  libgtest-dev libgmock-dev
+  libgtest-dev libgmock-dev libopenblas0-serial
 )
 
 install_deps() {
@@ -58,7 +59,8 @@ case "$cmd" in
     ;;
   test)
     install_deps; configure
-    cmake --build "$BUILD_DIR" -j "$JOBS"
+    # shellcheck disable=SC2086
+    cmake --build "$BUILD_DIR" -j "$JOBS" ${TARGETS:+--target $TARGETS}
     ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" "$@"
     ;;
   *) sed -n '2,13p' "$0"; [ "$cmd" = help ] || exit 2 ;;

@@ -141,20 +141,27 @@ const ControlMesh& MeshRefinement::coarse() const { return impl_->coarse; }
 const ControlMesh& MeshRefinement::fine() const { return impl_->fine; }
 const SparseRow& MeshRefinement::matrix() const { return impl_->S; }
 
-Result<MeshRefinement> MeshRefinement::create(const ControlMesh& coarse, int levels, int64_t max_fine_vertices) {
+Result<MeshRefinement> MeshRefinement::create(const ControlMesh& tagged_coarse, int levels, int64_t max_fine_vertices,
+                                              bool sharp_features) {
   return capture([&]() -> MeshRefinement {
     if (levels < 1 || levels > 6) {
       fail(ErrorCode::kInvalidArgument, "refinement levels must be between 1 and 6, got " + std::to_string(levels));
     }
-    validate_mesh(coarse).value();
+    validate_mesh(tagged_coarse).value();
     // Size estimate: each level multiplies the vertex count by about 4.
-    const int64_t estimate = static_cast<int64_t>(coarse.face_indices().size()) << (2 * levels);
+    const int64_t estimate = static_cast<int64_t>(tagged_coarse.face_indices().size()) << (2 * levels);
     if (estimate > 4 * max_fine_vertices) {
       fail(ErrorCode::kResourceExhausted, "refining " + std::to_string(levels) + " levels would give about " +
                                               std::to_string(estimate / 4) + " control points (limit " +
                                               std::to_string(max_fine_vertices) + ")");
     }
 
+    // The surface being refined: without its tags unless they are to shape it (as in the evaluator).
+    ControlMesh coarse = tagged_coarse;
+    if (!sharp_features) {
+      coarse.creases().clear();
+      coarse.corners().clear();
+    }
     MeshRefinement out;
     Impl& m = *out.impl_;
     m.levels = levels;

@@ -108,8 +108,12 @@ Result<LimitEvaluator> LimitEvaluator::create(const ControlMesh& mesh, const Opt
 
     auto impl = std::make_shared<Impl>();
     impl->mesh = mesh;
+    if (!options.sharp_features) {
+      impl->mesh.creases().clear();
+      impl->mesh.corners().clear();
+    }
     impl->options = options;
-    impl->refiner = internal::make_refiner(mesh);
+    impl->refiner = internal::make_refiner(impl->mesh);
 
     Bfr::SurfaceFactory::Options factory_options;
     factory_options.SetApproxLevelSmooth(options.approx_level_smooth);

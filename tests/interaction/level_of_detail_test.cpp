@@ -37,15 +37,18 @@ SurfacePoint random_point(const LimitEvaluator& ev, std::mt19937& rng) {
 // over the same regions.
 TEST(LevelOfDetail, SameLimitSurfaceOnBothLevels) {
   std::mt19937 rng(1);
+  // Both the smooth surface (tags ignored, the default) and the tagged one (sharp_features).
+  for (const bool sharp : {false, true}) {
   for (const std::string& name : lod_meshes()) {
     const ControlMesh coarse = test::load_asset_mesh(name);
     const double size = coarse.bounding_diagonal();
-    const LimitEvaluator::Options coarse_options{4, 6};
+    LimitEvaluator::Options coarse_options{4, 6};
+    coarse_options.sharp_features = sharp;
     const auto ev = LimitEvaluator::create(coarse, coarse_options).value();
     for (int levels = 1; levels <= 2; ++levels) {
-      const auto r = MeshRefinement::create(coarse, levels).value();
+      const auto r = MeshRefinement::create(coarse, levels, 20'000'000, sharp).value();
       EXPECT_TRUE(r.fine().all_quads());
-      EXPECT_EQ(r.fine().has_sharpness(), coarse.has_sharpness()) << name;
+      EXPECT_EQ(r.fine().has_sharpness(), sharp && coarse.has_sharpness()) << name;
       const auto fine_ev = LimitEvaluator::create(r.fine(), r.fine_evaluator_options(coarse_options)).value();
       for (int i = 0; i < 300; ++i) {
         const SurfacePoint p = random_point(ev, rng);
@@ -70,6 +73,7 @@ TEST(LevelOfDetail, SameLimitSurfaceOnBothLevels) {
       }
     }
   }
+}
 }
 
 // With the default evaluator options on both levels the surfaces still agree exactly on regular
@@ -293,7 +297,8 @@ TEST(LevelOfDetail, RejectsBadLevelsAndMeshes) {
 TEST(LevelOfDetail, CreasesAndBoundaryModeAreCarried) {
   ControlMesh coarse = test::load_asset_mesh("catmark_helmet.obj");
   ASSERT_TRUE(coarse.has_sharpness());
-  const auto r = MeshRefinement::create(coarse, 1).value();
+  EXPECT_FALSE(MeshRefinement::create(coarse, 1).value().fine().has_sharpness());  // default: smooth surface
+  const auto r = MeshRefinement::create(coarse, 1, 20'000'000, /*sharp_features=*/true).value();
   EXPECT_FALSE(r.fine().creases().empty());
   // Semi-sharp creases lose one unit of sharpness a level: the fine edge from coarse vertex v0
   // towards v1 (v0 is fine vertex v0) carries sharpness s - 1.

@@ -221,9 +221,12 @@ TEST(Picking, RefinedPointLiesOnRayAndLimitSurface) {
         // The refined point is close to the estimate (the estimate is within the chordal error).
         EXPECT_LT((ev.evaluate(pick->estimate).position - s.position).norm(), 50 * t.chordal_error() + 1e-12);
       } else {
-        // Only grazing rays (or rays past an open boundary) may fail to converge.
+        // Only grazing rays, rays past an open boundary, or rays that hit the triangles where
+        // they stick out of the limit surface (near a silhouette, within the chordal error: the
+        // ray then passes the exact surface) may fail to converge.
         const double cosine = std::abs(n.dot(ray.direction.normalized()));
-        EXPECT_TRUE(cosine < 0.2 || pick->status == RefineStatus::kAtBoundary)
+        EXPECT_TRUE(cosine < 0.2 || pick->status == RefineStatus::kAtBoundary ||
+                    pick->distance_to_ray <= t.chordal_error())
             << name << ": not converged at cos " << cosine << ", distance " << pick->distance_to_ray / size;
       }
     }

@@ -52,12 +52,20 @@ enum class ForceTransfer : uint8_t {
 ///  - faces: coarse face F (sub-face k) covers 4^levels (4^(levels-1) per sub-face) fine quads;
 ///    `fine_point` / `coarse_point` map a surface point between the levels exactly.
 ///
+/// With BoundaryMode::kNone only the fine faces that touch the boundary are ghosts, so the fine
+/// limit surface also covers the inner part of the coarse ghost ring (the coarse surface is the
+/// same part of it as before).
+///
 /// Immutable after `create`. Thread-safety: every member function may be called concurrently.
 class MeshRefinement {
  public:
   /// Refines `coarse` (which must pass `validate_mesh`) `levels` times, 1..6. kInvalidArgument for
   /// a bad level, kResourceExhausted if the fine mesh would have more than `max_fine_vertices`.
-  static Result<MeshRefinement> create(const ControlMesh& coarse, int levels, int64_t max_fine_vertices = 20'000'000);
+  /// `sharp_features` as in `LimitEvaluator::Options`: off (the default), crease and corner tags
+  /// are ignored, so the fine mesh has the smooth limit surface the evaluator and the simulation
+  /// use; on, they shape the refinement and are carried to the fine mesh.
+  static Result<MeshRefinement> create(const ControlMesh& coarse, int levels, int64_t max_fine_vertices = 20'000'000,
+                                       bool sharp_features = false);
 
   MeshRefinement(MeshRefinement&&) noexcept;
   MeshRefinement& operator=(MeshRefinement&&) noexcept;

@@ -67,10 +67,17 @@ class LimitEvaluator {
     int approx_level_smooth = 3;
     /// Bfr refinement levels around sharp features (OpenSubdiv default 6). Range 1..10.
     int approx_level_sharp = 6;
+    /// Let the mesh's crease and corner tags shape the surface. Off by default: the simulation
+    /// uses the smooth limit surface (a sharp kink would act as a hinge in a Kirchhoff-Love shell),
+    /// and a client must evaluate, render and pick on the same surface the server simulates, or
+    /// a (face, u, v) would name different points. Turn it on only to display tagged meshes
+    /// that are not simulated.
+    bool sharp_features = false;
   };
 
   /// Builds the evaluator. The mesh must pass `validate_mesh()`; otherwise its first issue is
-  /// returned. Copies the mesh.
+  /// returned. Copies the mesh (without its crease and corner tags unless
+  /// `options.sharp_features`): `mesh()` is the mesh as evaluated.
   static Result<LimitEvaluator> create(const ControlMesh& mesh, const Options& options);
   static Result<LimitEvaluator> create(const ControlMesh& mesh) { return create(mesh, Options{}); }
 
