@@ -26,8 +26,7 @@ options:
   --host HOST          address to listen on (default 127.0.0.1; 0.0.0.0 for every interface)
   --port PORT          TCP port (default 8080; 0 picks a free port, printed at start)
   --threads N          threads of each precomputation (default: the number of cores)
-  --solve-threads N    solves running at once (default 1: Debian's serial OpenBLAS, which
-                       CHOLMOD calls, is not thread-safe; raise it with a thread-safe BLAS)
+  --solve-threads N    solves running at once (default: the number of cores)
   --precompute-jobs N  geometries precomputed at the same time (default 1)
   --cache-mb M         memory budget of the factorization cache in MiB (default 1024);
                        least recently used factors are evicted to stay under it

@@ -2,9 +2,11 @@
 
 #include <chrono>
 #include <cstring>
+#include <mutex>
 #include <string>
 
 #include <cholmod.h>
+#include <dlfcn.h>
 
 namespace softshell::engine::internal {
 namespace {
@@ -28,6 +30,25 @@ struct ThreadCommon {
 cholmod_common* thread_common() {
   thread_local ThreadCommon common;
   return &common.common;
+}
+
+// CHOLMOD's supernodal factorization and solves call BLAS. OpenBLAS built without threading
+// (Debian's libopenblas0-serial) keeps global buffers and is not safe to call from several
+// threads at once: concurrent solves then return wrong numbers. Whatever BLAS the system loaded,
+// ask it; if it is such an OpenBLAS, the engine's BLAS-using calls take turns. Reference BLAS and
+// threaded OpenBLAS (libopenblas0-pthread, what build.sh installs) run concurrently.
+bool blas_is_thread_unsafe() {
+  static const bool unsafe = [] {
+    using Query = int (*)();
+    auto query = reinterpret_cast<Query>(dlsym(RTLD_DEFAULT, "openblas_get_parallel"));
+    return query != nullptr && query() == 0;  // 0 = sequential build
+  }();
+  return unsafe;
+}
+
+std::unique_lock<std::mutex> blas_turn() {
+  static std::mutex mutex;
+  return blas_is_thread_unsafe() ? std::unique_lock<std::mutex>(mutex) : std::unique_lock<std::mutex>();
 }
 
 }  // namespace
@@ -78,8 +99,13 @@ Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed
   }
   ap[na] = static_cast<int>(pos);
 
-  cholmod_factor* l = cholmod_analyze(a, c);
-  const bool ok = l && cholmod_factorize(a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
+  cholmod_factor* l = nullptr;
+  bool ok = false;
+  {
+    const auto turn = blas_turn();
+    l = cholmod_analyze(a, c);
+    ok = l && cholmod_factorize(a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
+  }
   const size_t minor = l ? l->minor : 0;
   cholmod_free_sparse(&a, c);
   if (!ok) {
@@ -120,7 +146,11 @@ Eigen::MatrixXd Factorization::solve(const Eigen::MatrixXd& rhs) const {
   b.x = const_cast<double*>(rhs.data());  // read only
   b.xtype = CHOLMOD_REAL;
   b.dtype = CHOLMOD_DOUBLE;
-  cholmod_dense* x = cholmod_solve(CHOLMOD_A, reinterpret_cast<cholmod_factor*>(factor_), &b, c);
+  cholmod_dense* x = nullptr;
+  {
+    const auto turn = blas_turn();
+    x = cholmod_solve(CHOLMOD_A, reinterpret_cast<cholmod_factor*>(factor_), &b, c);
+  }
   if (!x) fail(ErrorCode::kResourceExhausted, "not enough memory for the triangular solves");
   Eigen::MatrixXd out = Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(x->x), rhs.rows(), rhs.cols());
   cholmod_free_dense(&x, c);

@@ -35,12 +35,9 @@ namespace softshell::service {
 /// Configuration of a `Service`.
 struct ServiceOptions {
   /// Workers that run solves, i.e. solves running at once (0 = std::thread::hardware_concurrency()).
-  /// The default is 1: the solves call BLAS through CHOLMOD, and Debian's libopenblas0-serial
-  /// is not safe to call from several threads at once (concurrent solves then return wrong
-  /// displacements or spurious "constraints contradict each other" errors; reproduced in
-  /// service_tests, ConcurrentSolvesMatchSequentialOnes). Raise it only with a thread-safe BLAS
-  /// (e.g. libopenblas0-pthread, or reference BLAS). Precomputations do not call BLAS.
-  int solve_threads = 1;
+  /// (If the system's BLAS is a sequential OpenBLAS, which is not thread-safe, the engine makes
+  /// the BLAS parts of concurrent solves take turns; see ConcurrentSolvesMatchSequentialOnes.)
+  int solve_threads = 0;
   /// Geometries precomputed at the same time.
   int precompute_jobs = 1;
   /// Threads of one precomputation (`PrecomputeOptions::threads`); 0 = hardware concurrency.
