@@ -1,6 +1,7 @@
 #include "factorization.h"
 
 #include <chrono>
+#include <cstdlib>
 #include <cstring>
 #include <mutex>
 #include <string>
@@ -37,10 +38,18 @@ cholmod_common* thread_common() {
 // threads at once: concurrent solves then return wrong numbers. Whatever BLAS the system loaded,
 // ask it; if it is such an OpenBLAS, the engine's BLAS-using calls take turns. Reference BLAS and
 // threaded OpenBLAS (libopenblas0-pthread, what build.sh installs) run concurrently.
+//
+// A threaded OpenBLAS is also told to use one thread per call (unless OPENBLAS_NUM_THREADS says
+// otherwise): the service already runs solves in parallel, one per core, and BLAS threads on top
+// would only oversubscribe the cores (measured: 2 concurrent clients got less throughput than 1).
 bool blas_is_thread_unsafe() {
   static const bool unsafe = [] {
     using Query = int (*)();
     auto query = reinterpret_cast<Query>(dlsym(RTLD_DEFAULT, "openblas_get_parallel"));
+    if (query != nullptr && query() != 0 && std::getenv("OPENBLAS_NUM_THREADS") == nullptr) {
+      using SetThreads = void (*)(int);
+      if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(1);
+    }
     return query != nullptr && query() == 0;  // 0 = sequential build
   }();
   return unsafe;
