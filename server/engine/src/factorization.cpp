@@ -143,7 +143,8 @@ Factorization::~Factorization() {
   }
 }
 
-Eigen::MatrixXd Factorization::solve(const Eigen::MatrixXd& rhs) const {
+// Runs CHOLMOD's solve of `system` (CHOLMOD_A, _L, _Lt, _P, _Pt) on a block of right-hand sides.
+Eigen::MatrixXd Factorization::apply(int system, const Eigen::MatrixXd& rhs) const {
   if (!factor_ || rhs.cols() == 0) return Eigen::MatrixXd::Zero(rhs.rows(), rhs.cols());
   cholmod_common* c = thread_common();
   cholmod_dense b;
@@ -158,12 +159,22 @@ Eigen::MatrixXd Factorization::solve(const Eigen::MatrixXd& rhs) const {
   cholmod_dense* x = nullptr;
   {
     const auto turn = blas_turn();
-    x = cholmod_solve(CHOLMOD_A, reinterpret_cast<cholmod_factor*>(factor_), &b, c);
+    x = cholmod_solve(system, reinterpret_cast<cholmod_factor*>(factor_), &b, c);
   }
   if (!x) fail(ErrorCode::kResourceExhausted, "not enough memory for the triangular solves");
   Eigen::MatrixXd out = Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(x->x), rhs.rows(), rhs.cols());
   cholmod_free_dense(&x, c);
   return out;
+}
+
+Eigen::MatrixXd Factorization::solve(const Eigen::MatrixXd& rhs) const { return apply(CHOLMOD_A, rhs); }
+
+Eigen::MatrixXd Factorization::forward(const Eigen::MatrixXd& rhs) const {
+  return apply(CHOLMOD_L, apply(CHOLMOD_P, rhs));
+}
+
+Eigen::MatrixXd Factorization::backward(const Eigen::MatrixXd& y) const {
+  return apply(CHOLMOD_Pt, apply(CHOLMOD_Lt, y));
 }
 
 }  // namespace softshell::engine::internal

@@ -46,8 +46,16 @@ class Factorization {
 
   /// X = K_aa^-1 B for a block of right-hand sides (rows: factored DOFs). Thread-safe.
   Eigen::MatrixXd solve(const Eigen::MatrixXd& rhs) const;
+  /// The two halves of a solve with K_aa = P^T L L^T P: forward(B) = L^-1 P B and
+  /// backward(Y) = P^T L^-T Y, so solve(B) = backward(forward(B)) and B1^T K_aa^-1 B2 =
+  /// forward(B1)^T forward(B2). (A forward sweep of several columns costs about what one full
+  /// solve of one column does.)
+  Eigen::MatrixXd forward(const Eigen::MatrixXd& rhs) const;
+  Eigen::MatrixXd backward(const Eigen::MatrixXd& y) const;
 
  private:
+  Eigen::MatrixXd apply(int system, const Eigen::MatrixXd& rhs) const;
+
   std::vector<int32_t> fixed_, pinned_, factored_, position_;
   cholmod_factor_struct* factor_ = nullptr;
   size_t bytes_ = 0;

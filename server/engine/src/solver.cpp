@@ -447,10 +447,16 @@ Solution Solver::solve_on_cached_factor(const DeformationRequest& request) const
     const auto nr = static_cast<Eigen::Index>(rows.size());
     solution.stats.constraint_rows = static_cast<int32_t>(nr);
 
-    // Right-hand side of the unknown DOFs: loads minus the pull of the factor's prescribed DOFs.
+    // Right-hand side of the unknown DOFs: loads minus the pull of the factor's prescribed DOFs
+    // (only those prescribed to move pull; K is symmetric, so column j is row j).
+    Eigen::VectorXd b = p.load;
     Eigen::VectorXd u_fixed = Eigen::VectorXd::Zero(model.num_dofs());
-    for (int32_t dof : factor->fixed()) u_fixed[dof] = p.fixed_value[dof];
-    const Eigen::VectorXd b = p.load - k * u_fixed;
+    for (int32_t dof : factor->fixed()) {
+      const double value = p.fixed_value[dof];
+      if (value == 0.0) continue;
+      u_fixed[dof] = value;
+      for (Eigen::SparseMatrix<double>::InnerIterator it(k, dof); it; ++it) b[it.row()] -= it.value() * value;
+    }
 
     // Block right-hand side [b_a | K_aQ | C_a^T] and the small matrix M = [[K_QQ, C_Q^T], [C_Q, 0]].
     std::vector<int32_t> pin_index(static_cast<size_t>(model.num_dofs()), -1);
@@ -486,21 +492,21 @@ Solution Solver::solve_on_cached_factor(const DeformationRequest& request) const
       }
     }
 
-    // Schur complement on the cached factor: S = M - H^T K_aa^-1 H. A block right-hand side
-    // (r_a, r_small) is then solved by y = S^-1 (r_small - H^T K_aa^-1 r_a),
-    // x_a = K_aa^-1 r_a - K_aa^-1 H y.
-    const Eigen::MatrixXd z = factor->solve(rhs);
-    const auto h = rhs.rightCols(nq + nr);
-    const auto z_h = z.rightCols(nq + nr);
-    Eigen::MatrixXd schur = m - h.transpose() * z_h;
+    // Schur complement on the cached factor, with K_aa = P^T L L^T P and Y = L^-1 P [b_a | H]:
+    // S = M - Y_H^T Y_H, y = S^-1 (b_small - Y_H^T y_b), u_a = P^T L^-T (y_b - Y_H y). One forward
+    // sweep of all columns and one backward sweep of one column: about the cost of one solve.
+    const Eigen::MatrixXd forward = factor->forward(rhs);
+    const auto y_h = forward.rightCols(nq + nr);
+    Eigen::MatrixXd schur = m;
+    schur.noalias() -= y_h.transpose() * y_h;
     // The pins carry exactly the zero-energy motions the factor's fixed set leaves free, so the
     // Schur complement of K onto them vanishes identically (K_QQ - K_Qa K_aa^-1 K_aQ = 0); what the
     // subtraction leaves is cancellation noise of size eps |K|, which would swamp the constraint
     // block after scaling.
     schur.topLeftCorner(nq, nq).setZero();
     const SmallSystem small(schur);
-    Eigen::VectorXd y = small.solve(b_small - h.transpose() * z.col(0));
-    Eigen::VectorXd u_a = z.col(0) - z_h * y;
+    Eigen::VectorXd y = small.solve(b_small - y_h.transpose() * forward.col(0));
+    Eigen::VectorXd u_a = factor->backward(forward.col(0) - y_h * y);
 
     // Iterative refinement against the full system's residual: brings the constraints and the
     // equilibrium to round-off even when the small system is large and redundant.
@@ -511,15 +517,8 @@ Solution Solver::solve_on_cached_factor(const DeformationRequest& request) const
     };
     scatter();
     for (int step = 0; step < 3 && nr + nq > 0; ++step) {
-      // Residual of K u + C^T lambda = b on the unknown DOFs, and of C u = d.
-      const Eigen::VectorXd ku = k * u;
-      Eigen::VectorXd force = p.load - ku;
-      for (Eigen::Index r = 0; r < nr; ++r) {
-        for (const auto& [dof, coef] : rows[static_cast<size_t>(r)].terms) force[dof] -= coef * y[nq + r];
-      }
-      Eigen::VectorXd res_a(na), res_small(nq + nr);
-      for (Eigen::Index i = 0; i < na; ++i) res_a[i] = force[factor->factored()[static_cast<size_t>(i)]];
-      for (Eigen::Index q = 0; q < nq; ++q) res_small[q] = force[pins[static_cast<size_t>(q)]];
+      // Residual of C u = d (cheap: the rows only).
+      Eigen::VectorXd res_small(nq + nr);
       double worst = 0.0;
       for (Eigen::Index r = 0; r < nr; ++r) {
         const Row& row = rows[static_cast<size_t>(r)];
@@ -528,18 +527,31 @@ Solution Solver::solve_on_cached_factor(const DeformationRequest& request) const
         res_small[nq + r] = row.rhs - lhs;
         worst = std::max(worst, std::abs(row.rhs - lhs) / row.scale);
       }
+      const double u_scale = u.cwiseAbs().maxCoeff();
+      // Without pins the factor's solve is backward stable: equilibrium holds to round-off and
+      // only the constraints need checking. With pins, check equilibrium at them too.
+      if (nq == 0 && worst <= 1e-13 * u_scale) break;
+      // Residual of K u + C^T lambda = b on the unknown DOFs.
+      const Eigen::VectorXd ku = k * u;
+      Eigen::VectorXd force = p.load - ku;
+      for (Eigen::Index r = 0; r < nr; ++r) {
+        for (const auto& [dof, coef] : rows[static_cast<size_t>(r)].terms) force[dof] -= coef * y[nq + r];
+      }
+      Eigen::VectorXd res_a(na);
+      for (Eigen::Index i = 0; i < na; ++i) res_a[i] = force[factor->factored()[static_cast<size_t>(i)]];
+      for (Eigen::Index q = 0; q < nq; ++q) res_small[q] = force[pins[static_cast<size_t>(q)]];
       // Converged when the constraints hold to ~1e-13 of the displacement scale and equilibrium
       // to ~1e-12 of the forces involved; each further step costs one more pair of sweeps.
-      const double u_scale = u.cwiseAbs().maxCoeff();
       const double f_scale = std::max(p.load.cwiseAbs().maxCoeff(), ku.cwiseAbs().maxCoeff());
       const double equilibrium = std::max(res_a.size() ? res_a.cwiseAbs().maxCoeff() : 0.0,
                                           nq ? res_small.head(nq).cwiseAbs().maxCoeff() : 0.0);
       if (worst <= 1e-13 * u_scale && equilibrium <= 1e-12 * f_scale) break;
-      const Eigen::VectorXd z_r = factor->solve(res_a);
-      const Eigen::VectorXd dy = small.solve(res_small - h.transpose() * z_r);
-      u_a += z_r - z_h * dy;
+      const Eigen::VectorXd z_r = factor->forward(res_a);
+      const Eigen::VectorXd dy = small.solve(res_small - y_h.transpose() * z_r);
+      u_a += factor->backward(z_r - y_h * dy);
       y += dy;
       scatter();
+      ++solution.stats.refinement_steps;
     }
     for (int32_t dof : p.fixed) u[dof] = p.fixed_value[dof];
 

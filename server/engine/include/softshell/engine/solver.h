@@ -29,6 +29,7 @@ struct SolveStats {
   bool factor_cache_hit = false;
   int32_t constraint_rows = 0;  ///< Lagrange / limit / extra rows after dropping duplicates
   double factor_ms = 0.0;       ///< time spent factorizing (0 on a cache hit)
+  int32_t refinement_steps = 0; ///< iterative refinement steps taken (each one more solve)
   double solve_ms = 0.0;        ///< total time of the solve
 };
 
