@@ -6,11 +6,13 @@ namespace softshell::engine::internal {
 
 bool compute_frame(const Eigen::Ref<const Eigen::MatrixXd>& w, const Eigen::Ref<const Eigen::MatrixX3d>& x,
                    double youngs_modulus, double poisson_ratio, SurfaceFrame& out) {
-  out.a1 = (w.row(1) * x).transpose();
-  out.a2 = (w.row(2) * x).transpose();
-  out.a11 = (w.row(3) * x).transpose();
-  out.a12 = (w.row(4) * x).transpose();
-  out.a22 = (w.row(5) * x).transpose();
+  Eigen::Matrix<double, 6, 3> derivatives;  // x, x,u, x,v, x,uu, x,uv, x,vv as rows
+  derivatives.noalias() = w * x;
+  out.a1 = derivatives.row(1).transpose();
+  out.a2 = derivatives.row(2).transpose();
+  out.a11 = derivatives.row(3).transpose();
+  out.a12 = derivatives.row(4).transpose();
+  out.a22 = derivatives.row(5).transpose();
   const Vec3 a3_tilde = out.a1.cross(out.a2);
   out.j = a3_tilde.norm();
   if (!(out.j > 0.0) || !std::isfinite(out.j)) return false;
@@ -36,34 +38,62 @@ bool compute_frame(const Eigen::Ref<const Eigen::MatrixXd>& w, const Eigen::Ref<
   return true;
 }
 
-void strain_matrices(const Eigen::Ref<const Eigen::MatrixXd>& w, const SurfaceFrame& f, Matrix3Xd& bm,
-                     Matrix3Xd& bb) {
-  const Eigen::Index m = w.cols();
-  bm.resize(3, 3 * m);
-  bb.resize(3, 3 * m);
-  const double inv_j = 1.0 / f.j;
-  for (Eigen::Index a = 0; a < m; ++a) {
+namespace {
+
+// Calls out(col, membrane_column, bending_column) for every DOF column 3A + i of the strain-
+// displacement matrices. A unit displacement e_i of a control point with derivative weights
+// (N,1, N,2) changes the unnormalized normal by N,1 (e_i x a2) + N,2 (a1 x e_i); the unit normal
+// by that projected onto the tangent plane, divided by j (the term that vanishes on flat plates).
+// Everything but the weights is the same for all control points, so the dot products with a_ab
+// are taken once.
+template <class Out>
+void for_each_strain_column(const Eigen::Ref<const Eigen::MatrixXd>& w, const SurfaceFrame& f, Out&& out) {
+  Eigen::Matrix3d c, d;  // columns: e_i x a2, a1 x e_i
+  c << 0.0, f.a2.z(), -f.a2.y(),  //
+      -f.a2.z(), 0.0, f.a2.x(),   //
+      f.a2.y(), -f.a2.x(), 0.0;
+  d << 0.0, -f.a1.z(), f.a1.y(),  //
+      f.a1.z(), 0.0, -f.a1.x(),   //
+      -f.a1.y(), f.a1.x(), 0.0;
+  const Eigen::Matrix3d projection = (Eigen::Matrix3d::Identity() - f.a3 * f.a3.transpose()) / f.j;
+  const Eigen::Matrix3d pc = projection * c, pd = projection * d;
+  // a_ab . dn for a unit N,1 (g) and a unit N,2 (h), per axis i.
+  const Eigen::RowVector3d g11 = f.a11.transpose() * pc, h11 = f.a11.transpose() * pd;
+  const Eigen::RowVector3d g22 = f.a22.transpose() * pc, h22 = f.a22.transpose() * pd;
+  const Eigen::RowVector3d g12 = f.a12.transpose() * pc, h12 = f.a12.transpose() * pd;
+  for (Eigen::Index a = 0; a < w.cols(); ++a) {
     const double n1 = w(1, a), n2 = w(2, a), n11 = w(3, a), n12 = w(4, a), n22 = w(5, a);
     for (int i = 0; i < 3; ++i) {
-      const Eigen::Index col = 3 * a + i;
       // Membrane: e_ab = 1/2 (a_a . u,b + a_b . u,a).
-      bm(0, col) = n1 * f.a1[i];
-      bm(1, col) = n2 * f.a2[i];
-      bm(2, col) = n1 * f.a2[i] + n2 * f.a1[i];
-      // Bending: variation of b_ab = a_a,b . n, with the normal's variation projected onto the
-      // tangent plane (the term that vanishes on flat plates).
-      Vec3 e = Vec3::Zero();
-      e[i] = 1.0;
-      const Vec3 da3 = n1 * e.cross(f.a2) + n2 * f.a1.cross(e);
-      const Vec3 dn = (da3 - f.a3 * f.a3.dot(da3)) * inv_j;
-      const double db11 = n11 * f.a3[i] + f.a11.dot(dn);
-      const double db22 = n22 * f.a3[i] + f.a22.dot(dn);
-      const double db12 = n12 * f.a3[i] + f.a12.dot(dn);
-      bb(0, col) = -db11;
-      bb(1, col) = -db22;
-      bb(2, col) = -2.0 * db12;
+      const Eigen::Vector3d membrane(n1 * f.a1[i], n2 * f.a2[i], n1 * f.a2[i] + n2 * f.a1[i]);
+      // Bending: minus the variation of b_ab = a_a,b . n.
+      const Eigen::Vector3d bending(-(n11 * f.a3[i] + n1 * g11[i] + n2 * h11[i]),
+                                    -(n22 * f.a3[i] + n1 * g22[i] + n2 * h22[i]),
+                                    -2.0 * (n12 * f.a3[i] + n1 * g12[i] + n2 * h12[i]));
+      out(3 * a + i, membrane, bending);
     }
   }
+}
+
+}  // namespace
+
+void strain_matrices(const Eigen::Ref<const Eigen::MatrixXd>& w, const SurfaceFrame& f, Matrix3Xd& bm,
+                     Matrix3Xd& bb) {
+  bm.resize(3, 3 * w.cols());
+  bb.resize(3, 3 * w.cols());
+  for_each_strain_column(w, f, [&](Eigen::Index col, const Eigen::Vector3d& membrane, const Eigen::Vector3d& bending) {
+    bm.col(col) = membrane;
+    bb.col(col) = bending;
+  });
+}
+
+void weighted_strain_rows(const Eigen::Ref<const Eigen::MatrixXd>& w, const SurfaceFrame& f,
+                          const Eigen::Matrix3d& membrane_weight, const Eigen::Matrix3d& bending_weight,
+                          Eigen::Ref<Eigen::MatrixXd> out) {
+  for_each_strain_column(w, f, [&](Eigen::Index col, const Eigen::Vector3d& membrane, const Eigen::Vector3d& bending) {
+    out.block<3, 1>(0, col).noalias() = membrane_weight * membrane;
+    out.block<3, 1>(3, col).noalias() = bending_weight * bending;
+  });
 }
 
 Eigen::Matrix3d cartesian_strain_transform(const SurfaceFrame& f) {

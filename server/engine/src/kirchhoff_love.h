@@ -32,6 +32,12 @@ bool compute_frame(const Eigen::Ref<const Eigen::MatrixXd>& w, const Eigen::Ref<
 void strain_matrices(const Eigen::Ref<const Eigen::MatrixXd>& w, const SurfaceFrame& frame, Matrix3Xd& bm,
                      Matrix3Xd& bb);
 
+/// The 6 x 3m rows [Wm Bm; Wb Bb] written into `out`, without forming Bm and Bb (the element
+/// stiffness is then out^T out when Wm^T Wm and Wb^T Wb are the weighted material matrices).
+void weighted_strain_rows(const Eigen::Ref<const Eigen::MatrixXd>& w, const SurfaceFrame& frame,
+                          const Eigen::Matrix3d& membrane_weight, const Eigen::Matrix3d& bending_weight,
+                          Eigen::Ref<Eigen::MatrixXd> out);
+
 /// Local Cartesian transformation (e1 along a1, e2 in the tangent plane): maps curvilinear Voigt
 /// strains [e11, e22, 2e12] to Cartesian ones.
 Eigen::Matrix3d cartesian_strain_transform(const SurfaceFrame& frame);

@@ -49,7 +49,6 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
     x.row(a) = evaluator.mesh().positions()[static_cast<size_t>(out.indices[static_cast<size_t>(a)])].transpose();
   }
 
-  out.stiffness.setZero(3 * m, 3 * m);
   out.area_weights.setZero(m);
   out.normal_weights.setZero(3, m);
   out.points.clear();
@@ -57,28 +56,36 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
   const double t = material.thickness;
   const double membrane = t, bending = t * t * t / 12.0;
   internal::SurfaceFrame frame;
-  Matrix3Xd bm, bb;
-  Eigen::Matrix<double, 3, Eigen::Dynamic> dbm, dbb;
+  // K_e = sum over points of dA (Bm^T t C Bm + Bb^T t^3/12 C Bb). With C = L L^T, every term is
+  // G_q^T G_q for G_q = [sqrt(dA t) L^T Bm; sqrt(dA t^3/12) L^T Bb]: the rows of all points are
+  // stacked into G and K_e = G^T G is one symmetric rank update (far faster than a rank-3 update
+  // per point, and symmetric by construction).
+  Eigen::MatrixXd g(static_cast<Eigen::Index>(6 * uvs.size()), 3 * m);
   for (size_t q = 0; q < uvs.size(); ++q) {
     const auto w = basis.middleRows(static_cast<Eigen::Index>(6 * q), 6);
-    if (!internal::compute_frame(w, x, material.youngs_modulus, material.poisson_ratio, frame)) {
+    const bool regular = internal::compute_frame(w, x, material.youngs_modulus, material.poisson_ratio, frame);
+    // The material matrix is positive definite on a regular surface; a failed Cholesky factor means
+    // a metric so distorted that it is not (numerically) one.
+    const Eigen::LLT<Eigen::Matrix3d> material_factor(regular ? frame.material : Eigen::Matrix3d::Zero());
+    if (!regular || material_factor.info() != Eigen::Success) {
       std::ostringstream msg;
       msg << "the limit surface of face " << work.face << " is degenerate at (u, v) = (" << uvs[q][0] << ", "
           << uvs[q][1] << ")" << (work.subface ? " of sub-face " + std::to_string(work.subface) : std::string())
           << ": its tangents are parallel; check the control points around that face";
       fail(ErrorCode::kUnprocessable, msg.str());
     }
-    internal::strain_matrices(w, frame, bm, bb);
     const double dA = weights[q] * frame.j;
-    dbm.noalias() = (dA * membrane) * frame.material * bm;
-    dbb.noalias() = (dA * bending) * frame.material * bb;
-    out.stiffness.noalias() += bm.transpose() * dbm;
-    out.stiffness.noalias() += bb.transpose() * dbb;
+    const Eigen::Matrix3d lt = material_factor.matrixU();
+    internal::weighted_strain_rows(w, frame, std::sqrt(dA * membrane) * lt, std::sqrt(dA * bending) * lt,
+                                   g.middleRows(static_cast<Eigen::Index>(6 * q), 6));
     out.area_weights.noalias() += dA * w.row(0).transpose();
     out.normal_weights.noalias() += frame.a3 * (dA * w.row(0));
     out.area += dA;
     out.points.push_back({SurfacePoint{work.face, work.subface, uvs[q][0], uvs[q][1]}, weights[q]});
   }
+  out.stiffness.setZero(3 * m, 3 * m);
+  out.stiffness.selfadjointView<Eigen::Lower>().rankUpdate(g.transpose());
+  out.stiffness.triangularView<Eigen::StrictlyUpper>() = out.stiffness.transpose();
 }
 
 // Connected components by shared control points (union-find), then 6 rigid modes each.
