@@ -340,6 +340,11 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
   }
   compute_rigid_modes(mesh, model->component_of_, model->rigid_modes_);
   find_extra_zero_modes(*model, k, model->component_of_, model->rigid_modes_, model->zero_modes_, model->invisible_);
+  for (Eigen::Index mode = 0; mode < model->zero_modes_.cols(); ++mode) {
+    Eigen::Index dof = 0;
+    model->zero_modes_.col(mode).cwiseAbs().maxCoeff(&dof);
+    model->mode_component_.push_back(model->component_of_[static_cast<size_t>(dof / 3)]);
+  }
   model->area_weights_ = std::move(area_weights);
   model->normal_weights_ = std::move(normal_weights);
   model->area_ = area;

@@ -180,20 +180,40 @@ Problem build_problem(const ShellModel& model, const DeformationRequest& request
 
 // Zero-energy motions that the prescribed DOFs leave free: an orthonormal basis N of
 // combinations of the model's zero-energy modes (rigid and extra) that vanish on every prescribed
-// DOF.
+// DOF. Modes of different components never overlap, so this is done one component at a time
+// (a few modes each) instead of on all modes at once (an object of many parts has hundreds).
 Eigen::MatrixXd free_rigid_combinations(const ShellModel& model, const std::vector<int32_t>& fixed) {
   const Eigen::MatrixXd& modes = model.zero_energy_modes();
-  const Eigen::Index m = modes.cols();
-  Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(m, m);
-  for (int32_t dof : fixed) gram.noalias() += modes.row(dof).transpose() * modes.row(dof);
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(gram);
-  const double top = std::max(1.0, eig.eigenvalues().cwiseAbs().maxCoeff());
-  std::vector<Eigen::Index> null;
-  for (Eigen::Index i = 0; i < m; ++i) {
-    if (eig.eigenvalues()[i] <= 1e-11 * top) null.push_back(i);
+  const std::vector<int32_t>& mode_component = model.zero_energy_mode_component();
+  const std::vector<int32_t>& component_of = model.component_of();
+  std::vector<std::vector<Eigen::Index>> component_modes(static_cast<size_t>(model.num_components()));
+  for (Eigen::Index mode = 0; mode < modes.cols(); ++mode) {
+    component_modes[static_cast<size_t>(mode_component[static_cast<size_t>(mode)])].push_back(mode);
   }
-  Eigen::MatrixXd basis(m, static_cast<Eigen::Index>(null.size()));
-  for (size_t k = 0; k < null.size(); ++k) basis.col(static_cast<Eigen::Index>(k)) = eig.eigenvectors().col(null[k]);
+  std::vector<std::vector<int32_t>> component_fixed(component_modes.size());
+  for (int32_t dof : fixed) component_fixed[static_cast<size_t>(component_of[static_cast<size_t>(dof / 3)])].push_back(dof);
+
+  std::vector<Eigen::VectorXd> null;
+  for (size_t c = 0; c < component_modes.size(); ++c) {
+    const std::vector<Eigen::Index>& own = component_modes[c];
+    const auto m = static_cast<Eigen::Index>(own.size());
+    Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(m, m);
+    Eigen::RowVectorXd row(m);
+    for (int32_t dof : component_fixed[c]) {
+      for (Eigen::Index i = 0; i < m; ++i) row[i] = modes(dof, own[static_cast<size_t>(i)]);
+      gram.noalias() += row.transpose() * row;
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(gram);
+    const double top = std::max(1.0, eig.eigenvalues().cwiseAbs().maxCoeff());
+    for (Eigen::Index k = 0; k < m; ++k) {
+      if (eig.eigenvalues()[k] > 1e-11 * top) continue;
+      Eigen::VectorXd combination = Eigen::VectorXd::Zero(modes.cols());
+      for (Eigen::Index i = 0; i < m; ++i) combination[own[static_cast<size_t>(i)]] = eig.eigenvectors()(i, k);
+      null.push_back(std::move(combination));
+    }
+  }
+  Eigen::MatrixXd basis(modes.cols(), static_cast<Eigen::Index>(null.size()));
+  for (size_t k = 0; k < null.size(); ++k) basis.col(static_cast<Eigen::Index>(k)) = null[k];
   return basis;
 }
 

@@ -88,6 +88,8 @@ class ShellModel {
   /// For each extra mode (column num_rigid_modes() + k): true if it leaves the limit surface where
   /// it is (the solver then fixes its amplitude to zero when nothing else does).
   const std::vector<bool>& invisible_modes() const { return invisible_; }
+  /// The connected component each zero-energy mode (column of zero_energy_modes()) lives on.
+  const std::vector<int32_t>& zero_energy_mode_component() const { return mode_component_; }
 
   /// Connected component of each control point (0..c-1) and the number of components.
   const std::vector<int32_t>& component_of() const { return component_of_; }
@@ -122,6 +124,7 @@ class ShellModel {
   Eigen::MatrixXd rigid_modes_;
   Eigen::MatrixXd zero_modes_;
   std::vector<bool> invisible_;
+  std::vector<int32_t> mode_component_;
   std::vector<int32_t> component_of_;
   Eigen::VectorXd area_weights_;    // n: integral of N_A dA (consistent surface loads)
   Eigen::VectorXd normal_weights_;  // 3n: integral of N_A n dA (pressure)
