@@ -9,7 +9,8 @@
 #
 # Environment: BUILD_DIR (default: build), BUILD_TYPE (default: RelWithDebInfo), JOBS (default:
 # the number of cores), CMAKE_ARGS (extra cmake arguments), TARGETS (build only these targets,
-# space-separated; default all), SOFTSHELL_NO_APT=1 to skip apt-get.
+# space-separated; default all), EXTRA_PACKAGES (more Debian packages to install, e.g. clang),
+# SOFTSHELL_NO_APT=1 to skip apt-get.
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -23,7 +24,9 @@ PACKAGES=(
 install_deps() {
   [ "${SOFTSHELL_NO_APT:-0}" = 1 ] && return 0
   local missing=()
-  for p in "${PACKAGES[@]}"; do
+  # shellcheck disable=SC2206
+  local wanted=("${PACKAGES[@]}" ${EXTRA_PACKAGES:-})
+  for p in "${wanted[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
   done
   [ ${#missing[@]} -eq 0 ] && return 0
@@ -63,5 +66,5 @@ case "$cmd" in
     cmake --build "$BUILD_DIR" -j "$JOBS" ${TARGETS:+--target $TARGETS}
     ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" "$@"
     ;;
-  *) sed -n '2,13p' "$0"; [ "$cmd" = help ] || exit 2 ;;
+  *) sed -n '2,14p' "$0"; [ "$cmd" = help ] || exit 2 ;;
 esac
