@@ -165,11 +165,14 @@ void find_extra_zero_modes(const ShellModel& model, const Eigen::SparseMatrix<do
         if (i < m && d[static_cast<size_t>(i)] == it.row()) kc(i, j) = it.value();
       }
     }
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(kc);
+    // Eigenvalues first (a few times cheaper): almost every component has just its six rigid
+    // modes, and then the eigenvectors are not needed.
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(kc, Eigen::EigenvaluesOnly);
     const double top = eig.eigenvalues().cwiseAbs().maxCoeff();
     Eigen::Index zero = 0;
     while (zero < m && eig.eigenvalues()[zero] < 1e-10 * top) ++zero;
     if (zero <= 6) continue;
+    eig.compute(kc, Eigen::ComputeEigenvectors);
     // The null space minus the rigid modes of this component.
     Eigen::MatrixXd r(m, 6);
     for (Eigen::Index i = 0; i < m; ++i) r.row(i) = rigid.block(d[static_cast<size_t>(i)], 6 * c, 1, 6);
