@@ -114,6 +114,38 @@ TEST(Solver, EveryPathGivesTheSameAnswer) {
   EXPECT_NEAR(extra->displacement[3 * test::grid_index(8, 5, 2) + 2], 0.001, 1e-15);
 }
 
+// A grab on a larger plate makes the forward sweep local (only the elimination-tree paths from
+// the grabbed DOFs); a pressure reaches every DOF and takes the full sweep. Both must agree with
+// the robust path.
+TEST(Solver, LocalRightHandSidesSweepPartOfTheFactorWithTheSameAnswer) {
+  const int n = 30;
+  ControlMesh mesh = test::make_grid(n, n, 1.0, 1.0, [](double x, double) { return 0.2 * std::sin(3.0 * x); });
+  auto model = build(mesh);
+  Solver solver(model, std::make_shared<FactorCache>());
+  DeformationRequest grab;
+  for (int j = 0; j <= n; ++j) {
+    for (int i = 0; i <= 1; ++i) grab.vertex_constraints.push_back({test::grid_index(n, i, j), kAxisAll, Vec3::Zero()});
+  }
+  grab.limit_constraints.push_back({{n * n - 5, 0, 0.3, 0.8}, Vec3(0.0, 0.01, -0.02), Vec3(0.0, 0.0, 0.001), {}});
+  grab.forces.push_back({test::grid_index(n, n, n / 2), Vec3(0.0, 0.0, -3.0)});
+  DeformationRequest pressed = grab;
+  pressed.pressure = 200.0;
+
+  for (const DeformationRequest* request : {&grab, &pressed}) {
+    auto fast = solver.solve(*request);
+    ASSERT_TRUE(fast.ok()) << fast.error().message;
+    auto robust = solver.solve_with_fallback(*request);
+    ASSERT_TRUE(robust.ok()) << robust.error().message;
+    EXPECT_LT(relative_difference(fast->displacement, robust->displacement), 1e-9);
+    if (request == &grab) {
+      EXPECT_LT(fast->stats.forward_fraction, 0.5);  // local: a fraction of the factor
+      EXPECT_GT(fast->stats.forward_fraction, 0.0);
+    } else {
+      EXPECT_EQ(fast->stats.forward_fraction, 1.0);  // the pressure reaches every DOF
+    }
+  }
+}
+
 TEST(Solver, FreeBodyHeldOnlyByLimitConstraints) {
   // No vertex constraint at all: the factor pins the rigid modes, the limit constraints hold them.
   ControlMesh mesh = test::load_asset_mesh("catmark_torus.obj");

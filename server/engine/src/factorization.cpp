@@ -129,10 +129,18 @@ Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed
              ": part of the shell can move without strain; add constraints there");
   }
   factor_ = reinterpret_cast<cholmod_factor_struct*>(l);
+  if (l->is_super) {
+    const auto* super = static_cast<const int*>(l->super);
+    supernode_of_.resize(l->n);
+    for (size_t s = 0; s < l->nsuper; ++s) {
+      for (int col = super[s]; col < super[s + 1]; ++col) supernode_of_[static_cast<size_t>(col)] = static_cast<int32_t>(s);
+    }
+  }
   const size_t int_size = sizeof(int);
   bytes_ = l->is_super ? l->xsize * sizeof(double) + l->ssize * int_size + (3 * l->nsuper + 3) * int_size
                        : l->nzmax * (sizeof(double) + int_size);
-  bytes_ += 4 * l->n * int_size + n * sizeof(int32_t) + factored_.size() * sizeof(int32_t);
+  bytes_ += 4 * l->n * int_size + n * sizeof(int32_t) + factored_.size() * sizeof(int32_t) +
+            supernode_of_.size() * sizeof(int32_t);
   factor_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
@@ -169,8 +177,59 @@ Eigen::MatrixXd Factorization::apply(int system, const Eigen::MatrixXd& rhs) con
 
 Eigen::MatrixXd Factorization::solve(const Eigen::MatrixXd& rhs) const { return apply(CHOLMOD_A, rhs); }
 
-Eigen::MatrixXd Factorization::forward(const Eigen::MatrixXd& rhs) const {
-  return apply(CHOLMOD_L, apply(CHOLMOD_P, rhs));
+Eigen::MatrixXd Factorization::forward(const Eigen::MatrixXd& rhs, double* fraction_read) const {
+  Eigen::MatrixXd x;
+  double fraction = 1.0;
+  if (!sparse_forward(rhs, x, fraction)) x = apply(CHOLMOD_L, apply(CHOLMOD_P, rhs));
+  if (fraction_read) *fraction_read = fraction;
+  return x;
+}
+
+bool Factorization::sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read) const {
+  const auto* l = reinterpret_cast<const cholmod_factor*>(factor_);
+  if (!l || !l->is_super || l->xtype != CHOLMOD_REAL || l->dtype != CHOLMOD_DOUBLE || rhs.cols() == 0) return false;
+  const auto* super = static_cast<const int*>(l->super);
+  const auto* pi = static_cast<const int*>(l->pi);
+  const auto* px = static_cast<const int*>(l->px);
+  const auto* rows = static_cast<const int*>(l->s);
+  const auto* perm = static_cast<const int*>(l->Perm);
+  const auto* values = static_cast<const double*>(l->x);
+  const auto n = static_cast<Eigen::Index>(l->n);
+  const size_t nsuper = l->nsuper;
+
+  // Which supernodes the sweep reaches: those holding a nonzero row of P B, and every supernode
+  // that one of them updates (its off-diagonal rows), in ascending order (parents come later).
+  std::vector<char> reached(nsuper, 0);
+  for (Eigen::Index k = 0; k < n; ++k) {
+    if (!rhs.row(perm ? perm[k] : k).isZero(0.0)) reached[static_cast<size_t>(supernode_of_[static_cast<size_t>(k)])] = 1;
+  }
+  size_t work = 0;
+  for (size_t s = 0; s < nsuper; ++s) {
+    if (!reached[s]) continue;
+    const int ncols = super[s + 1] - super[s];
+    work += static_cast<size_t>(pi[s + 1] - pi[s]) * static_cast<size_t>(ncols);
+    for (int p = pi[s] + ncols; p < pi[s + 1]; ++p) reached[static_cast<size_t>(supernode_of_[static_cast<size_t>(rows[p])])] = 1;
+  }
+  if (2 * work > l->xsize) return false;  // most of the factor: CHOLMOD's BLAS sweep is faster
+
+  x.resize(n, rhs.cols());
+  for (Eigen::Index k = 0; k < n; ++k) x.row(k) = rhs.row(perm ? perm[k] : k);
+  Eigen::MatrixXd update;
+  for (size_t s = 0; s < nsuper; ++s) {
+    if (!reached[s]) continue;
+    // Supernode s: columns k1..k1+ncols-1, a column-major nrows x ncols block whose top square is
+    // the lower-triangular diagonal block and whose other rows are listed in `rows`.
+    const int k1 = super[s], ncols = super[s + 1] - k1, nrows = pi[s + 1] - pi[s];
+    const Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> block(values + px[s], nrows, ncols,
+                                                                            Eigen::OuterStride<>(nrows));
+    auto xs = x.middleRows(k1, ncols);
+    block.topRows(ncols).triangularView<Eigen::Lower>().solveInPlace(xs);
+    if (nrows == ncols) continue;
+    update.noalias() = block.bottomRows(nrows - ncols) * xs;
+    for (int i = 0; i < nrows - ncols; ++i) x.row(rows[pi[s] + ncols + i]) -= update.row(i);
+  }
+  fraction_read = static_cast<double>(work) / static_cast<double>(l->xsize);
+  return true;
 }
 
 Eigen::MatrixXd Factorization::backward(const Eigen::MatrixXd& y) const {

@@ -50,13 +50,22 @@ class Factorization {
   /// backward(Y) = P^T L^-T Y, so solve(B) = backward(forward(B)) and B1^T K_aa^-1 B2 =
   /// forward(B1)^T forward(B2). (A forward sweep of several columns costs about what one full
   /// solve of one column does.)
-  Eigen::MatrixXd forward(const Eigen::MatrixXd& rhs) const;
+  ///
+  /// Right-hand sides that are local (a grab touches a few dozen DOFs) make L^-1 P B sparse: it
+  /// is nonzero only on the paths from their rows to the root of the elimination tree. The
+  /// forward sweep then visits only those supernodes (on a nested-dissection factor of a surface,
+  /// a small share of it); `fraction_read`, if given, receives the share of the factor read.
+  Eigen::MatrixXd forward(const Eigen::MatrixXd& rhs, double* fraction_read = nullptr) const;
   Eigen::MatrixXd backward(const Eigen::MatrixXd& y) const;
 
  private:
   Eigen::MatrixXd apply(int system, const Eigen::MatrixXd& rhs) const;
+  // The forward sweep over the supernodes reachable from the nonzero rows of P B, if that is at
+  // most half of the factor; false (and `x` untouched) otherwise.
+  bool sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read) const;
 
   std::vector<int32_t> fixed_, pinned_, factored_, position_;
+  std::vector<int32_t> supernode_of_;  // per factor column, for a supernodal factor
   cholmod_factor_struct* factor_ = nullptr;
   size_t bytes_ = 0;
   double factor_ms_ = 0.0;

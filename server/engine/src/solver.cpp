@@ -514,8 +514,9 @@ Solution Solver::solve_on_cached_factor(const DeformationRequest& request) const
 
     // Schur complement on the cached factor, with K_aa = P^T L L^T P and Y = L^-1 P [b_a | H]:
     // S = M - Y_H^T Y_H, y = S^-1 (b_small - Y_H^T y_b), u_a = P^T L^-T (y_b - Y_H y). One forward
-    // sweep of all columns and one backward sweep of one column: about the cost of one solve.
-    const Eigen::MatrixXd forward = factor->forward(rhs);
+    // sweep of all columns (only the part of the factor they reach) and one backward sweep of one
+    // column: about the cost of one solve.
+    const Eigen::MatrixXd forward = factor->forward(rhs, &solution.stats.forward_fraction);
     const auto y_h = forward.rightCols(nq + nr);
     Eigen::MatrixXd schur = m;
     schur.noalias() -= y_h.transpose() * y_h;

@@ -30,6 +30,9 @@ struct SolveStats {
   int32_t constraint_rows = 0;  ///< Lagrange / limit / extra rows after dropping duplicates
   double factor_ms = 0.0;       ///< time spent factorizing (0 on a cache hit)
   int32_t refinement_steps = 0; ///< iterative refinement steps taken (each one more solve)
+  /// Share of the factor the forward sweep read: below 1 when loads and constraints are local
+  /// (a grab, a push), since then only the elimination-tree paths from their DOFs are swept.
+  double forward_fraction = 1.0;
   double solve_ms = 0.0;        ///< total time of the solve
 };
 
