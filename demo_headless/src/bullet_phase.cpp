@@ -128,10 +128,11 @@ BulletPhaseResult run_bullet_phase(const std::shared_ptr<Session>& session, cons
   if (stats.res_id != shown && on_result) on_result(stats.res_id);
   out.requests = static_cast<int>(stats.channel.sent);
   if (std::getenv("SOFTSHELL_DEMO_DEBUG")) {
+    const auto count = [](auto v) { return static_cast<unsigned long long>(v); };
     std::fprintf(stderr, "bridge: submitted %llu sent %llu replaced %llu completed %llu failed %llu unchanged %llu tc %g\n",
-                 (unsigned long long)stats.channel.submitted, (unsigned long long)stats.channel.sent,
-                 (unsigned long long)stats.channel.replaced, (unsigned long long)stats.channel.completed,
-                 (unsigned long long)stats.channel.failed, (unsigned long long)stats.unchanged_frames, stats.time_constant);
+                 count(stats.channel.submitted), count(stats.channel.sent), count(stats.channel.replaced),
+                 count(stats.channel.completed), count(stats.channel.failed), count(stats.unchanged_frames),
+                 stats.time_constant);
     if (stats.last_error) std::fprintf(stderr, "bridge error: %s\n", stats.last_error->message.c_str());
   }
   if (stats.res_id != 0) out.positions = bridge.control_positions(shell);

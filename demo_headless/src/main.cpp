@@ -32,6 +32,8 @@ summary.
   --quiet                no progress on stderr
   --json                 print one JSON object as the last line of stdout
   --help                 this text
+
+Environment: SOFTSHELL_DEMO_DEBUG=1 prints the Bullet bridge's request counters on stderr.
 )";
 
 bool parse_double(const std::string& s, double& out) {
