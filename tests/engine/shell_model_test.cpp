@@ -1,10 +1,12 @@
 #include "softshell/engine/shell_model.h"
 
 #include <atomic>
+#include <cstdio>
 
 #include <Eigen/Dense>
 #include <gtest/gtest.h>
 
+#include "softshell/engine/solver.h"
 #include "test_meshes.h"
 
 namespace softshell::engine {
@@ -151,6 +153,58 @@ TEST(ShellModel, RejectsBadMaterialAndMeshWithReasons) {
   ControlMesh broken({Vec3(0, 0, 0), Vec3(1, 0, 0)}, std::vector<std::vector<int32_t>>{{0, 1, 2}});
   auto bad_mesh = ShellModel::build(broken, unit_material());
   EXPECT_EQ(bad_mesh.error().code, ErrorCode::kInvalidArgument);
+}
+
+// A support loop (a row of control points squeezed next to another, as modellers do to sharpen an
+// edge) makes the parametrization of the faces beside it strongly non-uniform; one Gauss rule per
+// face then misjudges their stiffness. Distortion splitting must bring the answer to the
+// converged one.
+TEST(ShellModel, DistortedFacesAreSplitUntilTheirStiffnessConverges) {
+  // A plate folded along x = 0.75 (column 6), with support loops at columns 5 and 7 squeezed to
+  // 1/20 of the spacing on both sides of the fold.
+  const int n = 8;
+  const auto fold = [](double x, double) { return 0.3 * std::abs(x - 0.75); };
+  ControlMesh mesh = test::make_grid(n, 4, 1.0, 0.5, fold);
+  for (int j = 0; j <= 4; ++j) {
+    for (int i : {5, 7}) {
+      Vec3& p = mesh.positions()[static_cast<size_t>(test::grid_index(n, i, j))];
+      p.x() = 0.75 + (i - 6) * 0.05 / n;
+      p.z() = fold(p.x(), 0.0);
+    }
+  }
+  DeformationRequest request;
+  for (int j = 0; j <= 4; ++j) {
+    for (int i = 0; i <= 1; ++i) request.vertex_constraints.push_back({test::grid_index(n, i, j), kAxisAll, Vec3::Zero()});
+  }
+  request.surface_forces.push_back({{n * 2 - 1, 0, 0.5, 0.5}, Vec3(0.0, 0.0, -1.0)});
+  auto compliance = [&](const QuadratureOptions& quadrature) {
+    PrecomputeOptions options;
+    options.quadrature = quadrature;
+    auto model = build(mesh, options);
+    Solver solver(model, std::make_shared<FactorCache>());
+    auto solution = solver.solve(request);
+    EXPECT_TRUE(solution.ok()) << solution.error().message;
+    return model->load_vector(request).dot(solution->displacement);
+  };
+  QuadratureOptions reference;
+  reference.gauss_points = 6;
+  reference.max_cell_distortion = 1.25;
+  reference.max_distortion_splits = 5;
+  QuadratureOptions off;
+  off.max_cell_distortion = 0.0;
+  const double exact = compliance(reference);
+  const double unsplit = std::abs(compliance(off) / exact - 1.0);
+  const double split = std::abs(compliance(QuadratureOptions{}) / exact - 1.0);
+  std::printf("compliance error without splitting %.2e, with the default splitting %.2e\n", unsplit, split);
+  EXPECT_GT(unsplit, 1e-3);  // the case is hard for a single rule per face
+  EXPECT_LT(split, 0.1 * unsplit);
+
+  QuadratureOptions bad;
+  bad.max_cell_distortion = 0.5;
+  auto rejected = ShellModel::build(mesh, unit_material(), PrecomputeOptions{bad, {}, 0, nullptr, nullptr});
+  ASSERT_FALSE(rejected.ok());
+  EXPECT_EQ(rejected.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(rejected.error().message.find("max_cell_distortion"), std::string::npos);
 }
 
 }  // namespace

@@ -83,47 +83,47 @@ uint8_t IrregularCorners::corners(int32_t face, int32_t subface) const {
 
 namespace {
 
-void add_cell(double u0, double v0, double size, const std::vector<double>& gp, const std::vector<double>& gw,
-              std::vector<std::array<double, 2>>& out_uv, std::vector<double>& out_weight) {
-  for (size_t j = 0; j < gp.size(); ++j) {
-    for (size_t i = 0; i < gp.size(); ++i) {
-      out_uv.push_back({u0 + size * gp[i], v0 + size * gp[j]});
-      out_weight.push_back(size * size * gw[i] * gw[j]);
-    }
-  }
-}
-
 // Splits a cell while it touches an irregular corner of the unit square and levels remain.
-void refine(double u0, double v0, double size, int levels, uint8_t mask, const std::vector<double>& gp,
-            const std::vector<double>& gw, std::vector<std::array<double, 2>>& out_uv,
-            std::vector<double>& out_weight) {
+void refine(const Cell& cell, int levels, uint8_t mask, std::vector<Cell>& out) {
   const std::array<std::array<double, 2>, 4> corner = {{{0, 0}, {1, 0}, {1, 1}, {0, 1}}};
   bool touches = false;
   for (int c = 0; c < 4; ++c) {
     if (!(mask & (1u << c))) continue;
     const double cu = corner[static_cast<size_t>(c)][0], cv = corner[static_cast<size_t>(c)][1];
-    touches |= (cu == u0 || cu == u0 + size) && (cv == v0 || cv == v0 + size);
+    touches |= (cu == cell.u0 || cu == cell.u0 + cell.size) && (cv == cell.v0 || cv == cell.v0 + cell.size);
   }
   if (!touches || levels == 0) {
-    add_cell(u0, v0, size, gp, gw, out_uv, out_weight);
+    out.push_back(cell);
     return;
   }
-  const double h = 0.5 * size;
-  refine(u0, v0, h, levels - 1, mask, gp, gw, out_uv, out_weight);
-  refine(u0 + h, v0, h, levels - 1, mask, gp, gw, out_uv, out_weight);
-  refine(u0 + h, v0 + h, h, levels - 1, mask, gp, gw, out_uv, out_weight);
-  refine(u0, v0 + h, h, levels - 1, mask, gp, gw, out_uv, out_weight);
+  for (const Cell& child : split(cell)) refine(child, levels - 1, mask, out);
 }
 
 }  // namespace
 
-void face_rule(int gauss_points, int levels, uint8_t corner_mask, std::vector<std::array<double, 2>>& out_uv,
-               std::vector<double>& out_weight) {
-  std::vector<double> gp, gw;
-  gauss_legendre_01(gauss_points, gp, gw);
+std::array<Cell, 4> split(const Cell& cell) {
+  const double h = 0.5 * cell.size;
+  return {{{cell.u0, cell.v0, h}, {cell.u0 + h, cell.v0, h}, {cell.u0 + h, cell.v0 + h, h}, {cell.u0, cell.v0 + h, h}}};
+}
+
+void face_cells(int levels, uint8_t corner_mask, std::vector<Cell>& out) {
+  out.clear();
+  refine(Cell{0.0, 0.0, 1.0}, corner_mask ? levels : 0, corner_mask, out);
+}
+
+void cell_points(const std::vector<Cell>& cells, const std::vector<double>& gauss_points,
+                 const std::vector<double>& gauss_weights, std::vector<std::array<double, 2>>& out_uv,
+                 std::vector<double>& out_weight) {
   out_uv.clear();
   out_weight.clear();
-  refine(0.0, 0.0, 1.0, corner_mask ? levels : 0, corner_mask, gp, gw, out_uv, out_weight);
+  for (const Cell& cell : cells) {
+    for (size_t j = 0; j < gauss_points.size(); ++j) {
+      for (size_t i = 0; i < gauss_points.size(); ++i) {
+        out_uv.push_back({cell.u0 + cell.size * gauss_points[i], cell.v0 + cell.size * gauss_points[j]});
+        out_weight.push_back(cell.size * cell.size * gauss_weights[i] * gauss_weights[j]);
+      }
+    }
+  }
 }
 
 }  // namespace softshell::engine::internal

@@ -4,7 +4,8 @@
 // Regular faces are bicubic patches: one Gauss rule over the face. Faces next to an extraordinary
 // vertex (EV) or a sharp feature are piecewise polynomial on dyadic sub-squares that shrink toward
 // that corner (Bfr's patch tree), so the domain is split dyadically toward every irregular corner
-// and each cell gets its own Gauss rule.
+// and each cell gets its own Gauss rule. Cells whose parametrization is strongly non-uniform are
+// split further by the integration itself (shell_model.cpp), which sees the geometry.
 
 #include <array>
 #include <cstdint>
@@ -31,9 +32,22 @@ class IrregularCorners {
   std::vector<char> irregular_vertex_;  // per control point
 };
 
-/// The (u, v) points and weights of one (sub-)face: Gauss rules on dyadic cells refined
-/// `levels` times toward each corner in `corner_mask`. Weights sum to 1 (the domain's area).
-void face_rule(int gauss_points, int levels, uint8_t corner_mask, std::vector<std::array<double, 2>>& out_uv,
-               std::vector<double>& out_weight);
+/// A square [u0, u0 + size] x [v0, v0 + size] of a (sub-)face's parameter domain.
+struct Cell {
+  double u0 = 0.0, v0 = 0.0, size = 1.0;
+};
+
+/// Its four quarters.
+std::array<Cell, 4> split(const Cell& cell);
+
+/// The cells of one (sub-)face: the unit square split dyadically `levels` times toward each
+/// corner in `corner_mask`. Their areas sum to 1.
+void face_cells(int levels, uint8_t corner_mask, std::vector<Cell>& out);
+
+/// The tensor Gauss rule (points and weights on [0, 1]) on each cell, cell after cell; the
+/// weights include the cell's area.
+void cell_points(const std::vector<Cell>& cells, const std::vector<double>& gauss_points,
+                 const std::vector<double>& gauss_weights, std::vector<std::array<double, 2>>& out_uv,
+                 std::vector<double>& out_weight);
 
 }  // namespace softshell::engine::internal

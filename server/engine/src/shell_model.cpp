@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -35,19 +36,68 @@ struct FaceWork {
   uint8_t corner_mask;
 };
 
+// max/min over the points of one cell of the area element and of both tangents' lengths (1 for
+// a uniform parametrization).
+double cell_distortion(const Eigen::MatrixXd& basis, const Eigen::MatrixX3d& x, Eigen::Index first_point,
+                       Eigen::Index points) {
+  Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d high = Eigen::Vector3d::Zero();
+  for (Eigen::Index q = first_point; q < first_point + points; ++q) {
+    const Eigen::RowVector3d a1 = basis.row(6 * q + 1) * x, a2 = basis.row(6 * q + 2) * x;
+    const Eigen::Vector3d size(a1.cross(a2).norm(), a1.norm(), a2.norm());
+    low = low.cwiseMin(size);
+    high = high.cwiseMax(size);
+  }
+  if (!(low.minCoeff() > 0.0)) return std::numeric_limits<double>::infinity();
+  return high.cwiseQuotient(low).maxCoeff();
+}
+
 void integrate_element(const LimitEvaluator& evaluator, const Material& material, const QuadratureOptions& quad,
                        const FaceWork& work, Element& out) {
+  std::vector<double> gauss_points, gauss_weights;
+  internal::gauss_legendre_01(quad.gauss_points, gauss_points, gauss_weights);
+  const auto per_cell = static_cast<Eigen::Index>(gauss_points.size() * gauss_points.size());
+
+  // The cells: dyadic toward extraordinary corners, then split where the parametrization is far
+  // from uniform, one round of stencil evaluations per split level.
+  std::vector<internal::Cell> cells, accepted, next;
+  internal::face_cells(quad.ev_refinement_levels, work.corner_mask, cells);
   std::vector<std::array<double, 2>> uvs;
   std::vector<double> weights;
-  internal::face_rule(quad.gauss_points, quad.ev_refinement_levels, work.corner_mask, uvs, weights);
-
   Eigen::MatrixXd basis;
-  evaluator.face_stencils(work.face, work.subface, uvs, out.indices, basis);
-  const auto m = static_cast<Eigen::Index>(out.indices.size());
-  Eigen::MatrixX3d x(m, 3);
-  for (Eigen::Index a = 0; a < m; ++a) {
-    x.row(a) = evaluator.mesh().positions()[static_cast<size_t>(out.indices[static_cast<size_t>(a)])].transpose();
+  Eigen::MatrixX3d x;
+  bool split_any = false;
+  for (int round = 0;; ++round) {
+    internal::cell_points(cells, gauss_points, gauss_weights, uvs, weights);
+    evaluator.face_stencils(work.face, work.subface, uvs, out.indices, basis);
+    if (round == 0) {
+      x.resize(static_cast<Eigen::Index>(out.indices.size()), 3);
+      for (Eigen::Index a = 0; a < x.rows(); ++a) {
+        x.row(a) = evaluator.mesh().positions()[static_cast<size_t>(out.indices[static_cast<size_t>(a)])].transpose();
+      }
+    }
+    if (quad.max_cell_distortion <= 0.0 || round == quad.max_distortion_splits) {
+      accepted.insert(accepted.end(), cells.begin(), cells.end());
+      break;
+    }
+    next.clear();
+    for (size_t c = 0; c < cells.size(); ++c) {
+      if (cell_distortion(basis, x, static_cast<Eigen::Index>(c) * per_cell, per_cell) > quad.max_cell_distortion) {
+        const auto quarters = internal::split(cells[c]);
+        next.insert(next.end(), quarters.begin(), quarters.end());
+      } else {
+        accepted.push_back(cells[c]);
+      }
+    }
+    if (next.empty()) break;
+    split_any = true;
+    cells.swap(next);
   }
+  if (split_any) {  // the stencils of the final cells, in one evaluation
+    internal::cell_points(accepted, gauss_points, gauss_weights, uvs, weights);
+    evaluator.face_stencils(work.face, work.subface, uvs, out.indices, basis);
+  }
+  const auto m = x.rows();
 
   out.area_weights.setZero(m);
   out.normal_weights.setZero(3, m);
@@ -233,8 +283,11 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
   material.check().value();
   const QuadratureOptions& quad = options.quadrature;
   if (quad.gauss_points < 1 || quad.gauss_points > 10 || quad.ev_refinement_levels < 0 ||
-      quad.ev_refinement_levels > 8) {
-    fail(ErrorCode::kInvalidArgument, "quadrature: gauss_points must be 1..10 and ev_refinement_levels 0..8");
+      quad.ev_refinement_levels > 8 || quad.max_distortion_splits < 0 || quad.max_distortion_splits > 6 ||
+      !std::isfinite(quad.max_cell_distortion) || (quad.max_cell_distortion != 0.0 && quad.max_cell_distortion < 1.0)) {
+    fail(ErrorCode::kInvalidArgument,
+         "quadrature: gauss_points must be 1..10, ev_refinement_levels 0..8, max_distortion_splits 0..6 and "
+         "max_cell_distortion 0 (off) or at least 1");
   }
   // Sharp creases and corners make the limit surface C0 (or nearly so) along them: a
   // Kirchhoff-Love shell needs C1, and across a kink it would act as a hinge (near-zero bending

@@ -27,6 +27,14 @@ struct QuadratureOptions {
   /// Dyadic refinement levels of a face's domain toward an extraordinary vertex (0 = none). The
   /// basis there is piecewise polynomial on sub-squares that shrink toward the vertex. Range 0..8.
   int ev_refinement_levels = 3;
+  /// Cells whose parametrization is strongly non-uniform are split 2 x 2, up to
+  /// `max_distortion_splits` times: those where the area element or the length of a tangent
+  /// varies by more than this factor between the cell's Gauss points. Such faces appear where
+  /// tight support loops model a sharp edge; one Gauss rule over them is far from exact. >= 1;
+  /// 0 turns the splitting off.
+  double max_cell_distortion = 4.0;
+  /// Range 0..6.
+  int max_distortion_splits = 3;
 };
 
 /// Options of the precomputation.
