@@ -1,14 +1,14 @@
 // Precompute, factorization and warm-solve times and memory for every shipped mesh, beside the
 // paper's Table 1, and a scaling curve (DOFs vs time) up to ~100k DOFs.
 //
-// The setup of issue 3: aluminium-like material (E = 6.9e10 Pa, nu = 0.32, t = 2 mm) on the mesh
-// scaled to a 1 m bounding diagonal, the bottom 5% of the control points (lowest y; per connected
-// part, at least four) fixed. The
-// first solve factorizes K with those DOFs eliminated; every later ("warm") solve grabs a new
-// random limit point (random face, sub-face and (u, v)) and moves it 1 cm along its normal, which
-// reuses the cached factor (triangular solves plus a 3x3 Schur system). A grab that the request
-// cannot express (e.g. a point whose control points are all fixed) is skipped and counted.
-// "swept" is the mean share of the factor a warm solve's forward sweep reads (the grab is local).
+// Setup: aluminium-like material (E = 6.9e10 Pa, nu = 0.32, t = 2 mm) on the mesh scaled to a 1 m
+// bounding diagonal, the bottom 5% of the control points (lowest y; per connected part, at least
+// four) fixed. The first solve factorizes K with those DOFs eliminated; every later ("warm")
+// solve grabs a new random limit point (random face, sub-face and (u, v)) and moves it 1 cm along
+// its normal, which reuses the cached factor (triangular solves plus a 3x3 Schur system). A grab
+// that the request cannot express (e.g. a point whose control points are all fixed) is skipped
+// and counted. "swept" is the mean share of the factor a warm solve's forward sweep reads (the
+// grab is local).
 //
 // Usage: bench_engine [warm solves per mesh = 50] [largest scaling-curve DOFs = 100000, 0 = none]
 #include <cstdio>

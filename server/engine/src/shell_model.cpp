@@ -16,8 +16,6 @@
 
 namespace softshell::engine {
 
-using internal::Matrix3Xd;
-
 namespace {
 
 // The element stiffness of one (sub-)face and its load integrals, in the face's local indices.
