@@ -1,4 +1,4 @@
-// ThreadSanitizer suppressions of the service, HTTP and embedded test executables (compiled into
+// ThreadSanitizer suppressions of the test executables that run a server (compiled into
 // each: the runtime looks the function up in the executable).
 //
 // Debian's libcpp-httplib.so is not built with ThreadSanitizer. Its function-local statics (e.g.
