@@ -151,7 +151,7 @@ Factorization::~Factorization() {
   }
 }
 
-// Runs CHOLMOD's solve of `system` (CHOLMOD_A, _L, _Lt, _P, _Pt) on a block of right-hand sides.
+// Runs CHOLMOD's solve of `system` (CHOLMOD_L, _Lt, _P, _Pt) on a block of right-hand sides.
 Eigen::MatrixXd Factorization::apply(int system, const Eigen::MatrixXd& rhs) const {
   if (!factor_ || rhs.cols() == 0) return Eigen::MatrixXd::Zero(rhs.rows(), rhs.cols());
   cholmod_common* c = thread_common();
@@ -174,8 +174,6 @@ Eigen::MatrixXd Factorization::apply(int system, const Eigen::MatrixXd& rhs) con
   cholmod_free_dense(&x, c);
   return out;
 }
-
-Eigen::MatrixXd Factorization::solve(const Eigen::MatrixXd& rhs) const { return apply(CHOLMOD_A, rhs); }
 
 Eigen::MatrixXd Factorization::forward(const Eigen::MatrixXd& rhs, double* fraction_read) const {
   Eigen::MatrixXd x;
@@ -208,9 +206,9 @@ bool Factorization::sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& 
     if (!reached[s]) continue;
     const int ncols = super[s + 1] - super[s];
     work += static_cast<size_t>(pi[s + 1] - pi[s]) * static_cast<size_t>(ncols);
+    if (2 * work > l->xsize) return false;  // most of the factor: CHOLMOD's BLAS sweep is faster
     for (int p = pi[s] + ncols; p < pi[s + 1]; ++p) reached[static_cast<size_t>(supernode_of_[static_cast<size_t>(rows[p])])] = 1;
   }
-  if (2 * work > l->xsize) return false;  // most of the factor: CHOLMOD's BLAS sweep is faster
 
   x.resize(n, rhs.cols());
   for (Eigen::Index k = 0; k < n; ++k) x.row(k) = rhs.row(perm ? perm[k] : k);

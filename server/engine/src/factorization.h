@@ -44,11 +44,9 @@ class Factorization {
   size_t bytes() const { return bytes_; }
   double factor_ms() const { return factor_ms_; }
 
-  /// X = K_aa^-1 B for a block of right-hand sides (rows: factored DOFs). Thread-safe.
-  Eigen::MatrixXd solve(const Eigen::MatrixXd& rhs) const;
-  /// The two halves of a solve with K_aa = P^T L L^T P: forward(B) = L^-1 P B and
-  /// backward(Y) = P^T L^-T Y, so solve(B) = backward(forward(B)) and B1^T K_aa^-1 B2 =
-  /// forward(B1)^T forward(B2). (A forward sweep of several columns costs about what one full
+  /// The two halves of a solve with K_aa = P^T L L^T P (rows: factored DOFs; thread-safe):
+  /// forward(B) = L^-1 P B and backward(Y) = P^T L^-T Y, so K_aa^-1 B = backward(forward(B)) and
+  /// B1^T K_aa^-1 B2 = forward(B1)^T forward(B2). (A forward sweep of several columns costs about what one full
   /// solve of one column does.)
   ///
   /// Right-hand sides that are local (a grab touches a few dozen DOFs) make L^-1 P B sparse: it
