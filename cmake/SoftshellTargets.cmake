@@ -10,10 +10,19 @@ function(softshell_set_warnings target)
   endif()
 endfunction()
 
-# Adds a library of one layer: softshell_<name> with alias softshell::<name>, installed and exported.
+# Adds the library of one layer: softshell_<name> with alias softshell::<name>, installed and
+# exported. The layer's folder holds include/softshell/ (its public headers, installed) and src/.
+#   softshell_add_library(<name> SOURCES ... [PUBLIC_LIBS ...] [PRIVATE_LIBS ...])
 function(softshell_add_library name)
-  cmake_parse_arguments(ARG "" "" "SOURCES" ${ARGN})
+  cmake_parse_arguments(ARG "" "" "SOURCES;PUBLIC_LIBS;PRIVATE_LIBS" ${ARGN})
   add_library(softshell_${name} ${ARG_SOURCES})
+  if(EXISTS ${CMAKE_CURRENT_SOURCE_DIR}/include)
+    target_include_directories(softshell_${name} PUBLIC
+      $<BUILD_INTERFACE:${CMAKE_CURRENT_SOURCE_DIR}/include>
+      $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>)
+    install(DIRECTORY include/softshell DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+  endif()
+  target_link_libraries(softshell_${name} PUBLIC ${ARG_PUBLIC_LIBS} PRIVATE ${ARG_PRIVATE_LIBS})
   add_library(softshell::${name} ALIAS softshell_${name})
   set_target_properties(softshell_${name} PROPERTIES
     EXPORT_NAME ${name}
