@@ -324,20 +324,6 @@ TEST(WireRequestTest, HostileJsonBodies) {
   expect_invalid(wire::decode_request_json(R"({"surface_load": [0, 0, 1e400]})").error(), "invalid JSON");
 }
 
-TEST(WireRequestTest, ValidateRequestChecksIndicesAgainstTheMesh) {
-  DeformationRequest r = sample_request();
-  EXPECT_TRUE(wire::validate_request(r, 10));
-  expect_invalid(wire::validate_request(r, 9).error(), "refers to control point 9");
-  r.vertex_constraints[0].mask = 0;
-  expect_invalid(wire::validate_request(r, 10).error(), "mask");
-  DeformationRequest nan;
-  nan.pressure = std::nan("");
-  expect_invalid(wire::validate_request(nan, 10).error(), "pressure");
-  DeformationRequest point;
-  point.limit_constraints = {{{0, 0, -0.1, 0.5}, Vec3::Zero(), std::nullopt, std::nullopt}};
-  expect_invalid(wire::validate_request(point, 10).error(), "[0, 1]");
-}
-
 TEST(WireResultTest, RoundTrips) {
   DeformationResult r{42, {Vec3(0, 1, 2), Vec3(0.5, -0.25, 1e-3)}};
   auto bin = wire::encode_result_binary(r);

@@ -292,21 +292,13 @@ ss_status guard(const char* function, const std::function<void()>& fn) noexcept 
       fn();
       g_message.clear();
       return SS_OK;
-    } catch (const CStatus& s) {
+    } catch (const CStatus& s) {  // the C ABI's own statuses (buffer too small, not ready)
       g_message = std::string(function) + ": " + s.message;
       return s.status;
-    } catch (const Exception& e) {
-      g_message = std::string(function) + ": " + e.what();
-      return static_cast<ss_status>(e.code());
-    } catch (const std::bad_alloc&) {
-      g_message = std::string(function) + ": out of memory";
-      return SS_RESOURCE_EXHAUSTED;
-    } catch (const std::exception& e) {
-      g_message = std::string(function) + ": internal error: " + e.what();
-      return SS_INTERNAL;
     } catch (...) {
-      g_message = std::string(function) + ": internal error (unknown exception)";
-      return SS_INTERNAL;
+      const Error error = error_from(std::current_exception());
+      g_message = std::string(function) + ": " + error.message;
+      return static_cast<ss_status>(error.code);
     }
   } catch (...) {
     // Even storing the message failed (out of memory).

@@ -236,19 +236,18 @@ SurfacePoint surface_point(const json& obj, const std::string& path, std::string
   return p;
 }
 
+// The parser's own errors are the client's: invalid JSON. Everything else as `capture` says.
 template <class Fn>
-auto decoding(Fn&& fn) -> Result<decltype(fn())> {
-  try {
-    return fn();
-  } catch (const Exception& e) {
-    return e.error();
-  } catch (const json::exception& e) {
-    return Error{ErrorCode::kInvalidArgument, std::string("invalid JSON: ") + e.what()};
-  } catch (const std::bad_alloc&) {
-    return Error{ErrorCode::kResourceExhausted, "out of memory while decoding the body"};
-  } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal, std::string("internal error while decoding: ") + e.what()};
-  }
+auto decoding(Fn&& fn) {
+  return capture(
+      [&] {
+        try {
+          return fn();
+        } catch (const json::exception& e) {
+          fail(ErrorCode::kInvalidArgument, std::string("invalid JSON: ") + e.what());
+        }
+      },
+      "decoding the body");
 }
 
 void write_geometry_fields(JsonOut& out, const ControlMesh& mesh, const Material& material) {

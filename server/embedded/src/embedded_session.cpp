@@ -37,11 +37,7 @@ int EmbeddedSession::port() const {
 
 Result<UploadResult> EmbeddedSession::upload(const ControlMesh& mesh, const Material& material,
                                              std::string_view name_space) {
-  try {
-    return service_->upload(mesh, material, std::string(name_space));
-  } catch (const std::bad_alloc&) {
-    return Error{ErrorCode::kResourceExhausted, "out of memory while copying the mesh"};
-  }
+  return capture([&] { return service_->upload(mesh, material, std::string(name_space)); }, "copying the mesh");
 }
 
 Result<std::vector<GeometryInfo>> EmbeddedSession::geometries() { return service_->geometries(); }

@@ -110,12 +110,6 @@ Result<UploadResult> decode_upload_response_json(std::string_view body, bool cre
 // ---------------------------------------------------------------------------------------------
 // Deformation requests (`POST /geometries/{id}/results`)
 
-/// Checks a request for everything that does not need the mesh's limit surface: masks 1..7,
-/// finite numbers, one coefficient triple per Lagrange index, control point indices in
-/// [0, num_control_points), sub-face indices >= 0 and u, v in [0, 1]. kInvalidArgument naming
-/// the first bad field. (Decoders apply the checks that need no vertex count.)
-Result<void> validate_request(const DeformationRequest& request, int32_t num_control_points);
-
 /// Binary request body (three u32 counts first, see PROTOCOL.md). kInvalidArgument if the request
 /// uses JSON-only fields (`!fits_binary_layout()`) or a number is not finite or overflows f32.
 Result<std::string> encode_request_binary(const DeformationRequest& request);

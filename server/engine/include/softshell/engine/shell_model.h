@@ -110,7 +110,7 @@ class ShellModel {
   double strain_energy(const Eigen::VectorXd& displacement) const;
 
   /// The load vector (3n) of a request's forces, surface forces, surface load and pressure.
-  /// Throws Exception(kInvalidArgument) for an index or surface point out of range.
+  /// Precondition: the loads pass `validate_request` (asserted: SOFTSHELL_ASSERT).
   Eigen::VectorXd load_vector(const DeformationRequest& request) const;
 
   /// Bytes held (matrix, quadrature, evaluator estimate).
