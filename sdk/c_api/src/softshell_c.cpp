@@ -24,6 +24,7 @@
 #include "softshell/obj_io.h"
 #include "softshell/picking.h"
 #include "softshell/remote_session.h"
+#include "softshell/request_validation.h"
 #include "softshell/session.h"
 #include "softshell/softshell_c_bridge.h"
 #include "softshell/tessellation.h"
@@ -163,6 +164,20 @@ Vec3 vec(const ss_vec3* v, const char* argument) {
 }
 
 ss_vec3 to_c(const Vec3& v) { return ss_vec3{v.x(), v.y(), v.z()}; }
+
+// A vector that becomes part of a request: only converted here; `add_valid` checks the element.
+Vec3 request_vec(const ss_vec3* v, const char* argument) {
+  required(v, argument);
+  return Vec3(v->x, v->y, v->z);
+}
+
+// Appends an element to a request after the SDK's one request validator has accepted it (the
+// geometry is not known yet: indices are checked against it when the request is solved).
+template <class Element>
+void add_valid(std::vector<Element>& elements, Element element) {
+  softshell::validate(element, elements.size(), softshell::RequestContext{}).value();
+  elements.push_back(std::move(element));
+}
 
 softshell::SurfacePoint point(const ss_surface_point* p, const char* argument) {
   required(p, argument);
@@ -686,24 +701,21 @@ ss_status ss_request_add_vertex_constraint(ss_request* request, int32_t index, u
                                            const ss_vec3* displacement) {
   return guard("ss_request_add_vertex_constraint", [&] {
     auto& r = live(request, kRequestTag, "request").request;
-    if (index < 0) fail(ErrorCode::kInvalidArgument, "control point index must not be negative");
-    if (mask == 0 || mask > 7) fail(ErrorCode::kInvalidArgument, "mask must be 1..7 (1 = x, 2 = y, 4 = z)");
-    r.vertex_constraints.push_back({index, mask, vec(displacement, "displacement")});
+    add_valid(r.vertex_constraints, {index, mask, request_vec(displacement, "displacement")});
   });
 }
 
 ss_status ss_request_add_force(ss_request* request, int32_t index, const ss_vec3* force) {
   return guard("ss_request_add_force", [&] {
     auto& r = live(request, kRequestTag, "request").request;
-    if (index < 0) fail(ErrorCode::kInvalidArgument, "control point index must not be negative");
-    r.forces.push_back({index, vec(force, "force")});
+    add_valid(r.forces, {index, request_vec(force, "force")});
   });
 }
 
 ss_status ss_request_add_surface_force(ss_request* request, const ss_surface_point* p, const ss_vec3* force) {
   return guard("ss_request_add_surface_force", [&] {
     auto& r = live(request, kRequestTag, "request").request;
-    r.surface_forces.push_back({point(p, "point"), vec(force, "force")});
+    add_valid(r.surface_forces, {point(p, "point"), request_vec(force, "force")});
   });
 }
 
@@ -713,10 +725,10 @@ ss_status ss_request_add_limit_constraint(ss_request* request, const ss_surface_
     auto& r = live(request, kRequestTag, "request").request;
     softshell::LimitConstraint c;
     c.point = point(p, "point");
-    c.displacement = vec(displacement, "displacement");
-    if (du_displacement) c.du_displacement = vec(du_displacement, "du_displacement");
-    if (dv_displacement) c.dv_displacement = vec(dv_displacement, "dv_displacement");
-    r.limit_constraints.push_back(c);
+    c.displacement = request_vec(displacement, "displacement");
+    if (du_displacement) c.du_displacement = request_vec(du_displacement, "du_displacement");
+    if (dv_displacement) c.dv_displacement = request_vec(dv_displacement, "dv_displacement");
+    add_valid(r.limit_constraints, std::move(c));
   });
 }
 
@@ -729,25 +741,27 @@ ss_status ss_request_add_lagrange_constraint(ss_request* request, const int32_t*
     required(coefficients, "coefficients");
     softshell::LagrangeConstraint c;
     for (int32_t k = 0; k < count; ++k) {
-      if (indices[k] < 0) fail(ErrorCode::kInvalidArgument, "control point index must not be negative");
       c.indices.push_back(indices[k]);
-      c.coefficients.push_back(vec(&coefficients[k], "coefficients"));
+      c.coefficients.push_back(request_vec(&coefficients[k], "coefficients"));
     }
-    c.values = vec(values, "values");
-    r.lagrange_constraints.push_back(std::move(c));
+    c.values = request_vec(values, "values");
+    add_valid(r.lagrange_constraints, std::move(c));
   });
 }
 
 ss_status ss_request_set_surface_load(ss_request* request, const ss_vec3* load_per_area) {
   return guard("ss_request_set_surface_load", [&] {
-    live(request, kRequestTag, "request").request.surface_load = vec(load_per_area, "load_per_area");
+    auto& r = live(request, kRequestTag, "request").request;
+    const Vec3 load = request_vec(load_per_area, "load_per_area");
+    softshell::validate_loads(load, r.pressure).value();
+    r.surface_load = load;
   });
 }
 
 ss_status ss_request_set_pressure(ss_request* request, double pressure) {
   return guard("ss_request_set_pressure", [&] {
     auto& r = live(request, kRequestTag, "request").request;
-    if (!std::isfinite(pressure)) fail(ErrorCode::kInvalidArgument, "pressure must be finite");
+    softshell::validate_loads(r.surface_load, pressure).value();
     r.pressure = pressure;
   });
 }
