@@ -307,4 +307,16 @@ Result<LimitComb> RemoteSession::limit_comb(const GeomId& id, const SurfacePoint
                                         : wire::decode_limit_comb_json(reply->body);
 }
 
+Result<StressField> RemoteSession::stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) {
+  const std::string path = geometry_path(id) + "/results/" + std::to_string(res_id) + "/stresses";
+  auto reply = query.level > 0 ? impl_->get(path + "?level=" + std::to_string(query.level) +
+                                                "&yield_strength=" + number_text(query.yield_strength),
+                                            wire::kJsonMediaType)
+                               : impl_->post(path, wire::encode_stress_query_json(query), wire::Format::kJson,
+                                             wire::kJsonMediaType);
+  if (!reply) return reply.error();
+  if (reply->status != 200) return Impl::server_error(*reply);
+  return wire::decode_stress_field_json(reply->body);
+}
+
 }  // namespace softshell

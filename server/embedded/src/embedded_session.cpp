@@ -93,4 +93,8 @@ Result<LimitComb> EmbeddedSession::limit_comb(const GeomId& id, const SurfacePoi
   return service_->limit_comb(id, point);
 }
 
+Result<StressField> EmbeddedSession::stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) {
+  return service_->stresses(id, res_id, query);
+}
+
 }  // namespace softshell

@@ -17,6 +17,8 @@
 #include "softshell/content_id.h"
 #include "softshell/mesh_validation.h"
 #include "softshell/request_validation.h"
+#include "softshell/tessellation.h"
+#include "softshell/engine/stresses.h"
 #include "softshell/wire.h"
 #include "task_pool.h"
 
@@ -116,6 +118,16 @@ Result<void> check_namespace(std::string_view ns) {
       if ((static_cast<unsigned char>(ns[i + k]) >> 6) != 0x2) return bad("a namespace must be valid UTF-8");
     }
     i += len;
+  }
+  return {};
+}
+
+// Stress query points must lie on the limit surface; the message names the first that does not.
+Result<void> validate_points(const std::vector<SurfacePoint>& points, const LimitEvaluator& evaluator) {
+  for (size_t k = 0; k < points.size(); ++k) {
+    if (auto ok = evaluator.check(points[k]); !ok) {
+      return Error{ErrorCode::kInvalidArgument, "stress point " + std::to_string(k) + ": " + ok.error().message};
+    }
   }
   return {};
 }
@@ -512,6 +524,51 @@ Result<ResultPtr> Service::result(const GeomId& id, uint32_t res_id) const {
                                            " (it has " + std::to_string(e->results.size()) + ")"};
   }
   return e->results[res_id - 1];
+}
+
+Result<StressField> Service::stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) const {
+  if (query.level != 0 && (query.level < 1 || query.level > StressQuery::kMaxLevel)) {
+    return Error{ErrorCode::kInvalidArgument, "stresses: level " + std::to_string(query.level) +
+                                                  " is outside 1.." + std::to_string(StressQuery::kMaxLevel)};
+  }
+  if (!(query.yield_strength >= 0.0) || !std::isfinite(query.yield_strength)) {
+    return Error{ErrorCode::kInvalidArgument, "stresses: the yield strength must be a finite number >= 0 (Pa)"};
+  }
+  if (query.level == 0 && query.points.size() > StressQuery::kMaxPoints) {
+    return Error{ErrorCode::kInvalidArgument, "stresses: " + std::to_string(query.points.size()) +
+                                                  " points asked for, at most " +
+                                                  std::to_string(StressQuery::kMaxPoints) + " are served at once"};
+  }
+  auto stored = result(id, res_id);
+  if (!stored) return stored.error();
+  std::shared_ptr<const engine::ShellModel> model;
+  {
+    auto e = impl_->find(id);
+    std::lock_guard lock(e->mu);
+    model = e->model;  // a stored result implies a finished precomputation
+  }
+  if (!model) return Error{ErrorCode::kInternal, "stresses: geometry " + id.hex() + " has results but no model"};
+  return capture([&] {
+    const ControlMesh& mesh = model->mesh();
+    Eigen::VectorXd u(model->num_dofs());
+    for (int32_t i = 0; i < mesh.num_vertices(); ++i) {
+      u.segment<3>(3 * i) = (*stored)->positions[static_cast<size_t>(i)] - mesh.positions()[static_cast<size_t>(i)];
+    }
+    StressField field;
+    field.res_id = res_id;
+    field.yield_strength = query.yield_strength;
+    const engine::StressSummary summary = engine::max_stress(*model, u, field.yield_strength);
+    field.max = summary.max;
+    field.exceeds_yield = field.yield_strength > 0.0 && summary.exceeds_yield;
+    if (query.level > 0) {
+      const Tessellation tessellation = Tessellation::create(model->evaluator(), query.level).value();
+      field.samples = engine::evaluate_stresses(*model, u, tessellation.vertex_points());
+    } else {
+      if (auto ok = validate_points(query.points, model->evaluator()); !ok) return Result<StressField>(ok.error());
+      field.samples = engine::evaluate_stresses(*model, u, query.points);
+    }
+    return Result<StressField>(std::move(field));
+  }, "computing stresses");
 }
 
 Result<ResultPtr> Service::latest_result(const GeomId& id, uint32_t have, std::chrono::milliseconds wait,
