@@ -179,6 +179,7 @@ Result<DemoReport> run_demo(const DemoOptions& options) {
     const std::filesystem::path mesh_path = options.mesh.empty() ? default_mesh() : options.mesh;
     ControlMesh mesh = read_obj(mesh_path).value();
     report.mesh = mesh_path.filename().string();
+    report.mesh_path = mesh_path.string();
     report.material = options.material_name;
     report.control_points = mesh.num_vertices();
     report.faces = mesh.num_faces();
@@ -503,6 +504,7 @@ std::string format_summary(const DemoReport& r) {
 std::string format_json(const DemoReport& r) {
   nlohmann::json j = {
       {"mesh", r.mesh},
+      {"mesh_path", r.mesh_path},
       {"server", r.server},
       {"deformations", r.deformations},
       {"precompute_ms", r.precompute_ms},
