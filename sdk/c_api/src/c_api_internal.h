@@ -19,6 +19,7 @@
 
 #include "softshell/control_mesh.h"
 #include "softshell/deformation.h"
+#include "softshell/interaction.h"
 #include "softshell/level_of_detail.h"
 #include "softshell/limit_evaluator.h"
 #include "softshell/picking.h"
@@ -26,7 +27,6 @@
 #include "softshell/session.h"
 #include "softshell/softshell_c.h"
 #include "softshell/tessellation.h"
-#include "softshell/interaction.h"
 
 namespace softshell::c_api {
 

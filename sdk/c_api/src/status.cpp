@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <mutex>
 #include <string>
+#include <string_view>
 
 #include "c_api_internal.h"
 #include "softshell/softshell_c_bridge.h"
@@ -26,6 +27,8 @@ static_assert(sizeof(ss_geometry_status) == 24 && offsetof(ss_geometry_status, p
 static_assert(SS_VERSION_MAJOR == SOFTSHELL_VERSION_MAJOR && SS_VERSION_MINOR == SOFTSHELL_VERSION_MINOR &&
                   SS_VERSION_PATCH == SOFTSHELL_VERSION_PATCH,
               "softshell_c.h's SS_VERSION_* differ from project(VERSION) in CMakeLists.txt");
+static_assert(std::string_view(SS_VERSION_STRING) == SOFTSHELL_VERSION_STRING,
+              "softshell_c.h's SS_VERSION_STRING differs from project(VERSION) in CMakeLists.txt");
 
 namespace softshell::c_api {
 namespace {
