@@ -15,15 +15,23 @@ set(launchers "")
 if(CXX_LAUNCHER)
   list(APPEND launchers -DCMAKE_CXX_COMPILER_LAUNCHER=${CXX_LAUNCHER} -DCMAKE_C_COMPILER_LAUNCHER=${CXX_LAUNCHER})
 endif()
+# (A static build's archives need the private dependencies too: then nothing is restricted.)
+set(restrict "")
+if(SHARED)
+  set(restrict -DCMAKE_FIND_ROOT_PATH=${VIEW}
+      -DCMAKE_FIND_ROOT_PATH_MODE_PACKAGE=ONLY -DCMAKE_FIND_ROOT_PATH_MODE_LIBRARY=ONLY
+      -DCMAKE_FIND_ROOT_PATH_MODE_INCLUDE=ONLY -DCMAKE_FIND_ROOT_PATH_MODE_PROGRAM=NEVER)
+endif()
 run(${CMAKE_COMMAND} -S ${SOURCE} -B ${BUILD} -G ${GENERATOR} -DCMAKE_BUILD_TYPE=Release
     -DCMAKE_C_COMPILER=${C_COMPILER} -DCMAKE_CXX_COMPILER=${CXX_COMPILER} ${launchers}
     "-DCMAKE_CXX_FLAGS=${FLAGS}" "-DCMAKE_C_FLAGS=${FLAGS}"
-    -DCMAKE_PREFIX_PATH=${PREFIX}
-    -DCMAKE_FIND_ROOT_PATH=${VIEW}
-    -DCMAKE_FIND_ROOT_PATH_MODE_PACKAGE=ONLY -DCMAKE_FIND_ROOT_PATH_MODE_LIBRARY=ONLY
-    -DCMAKE_FIND_ROOT_PATH_MODE_INCLUDE=ONLY -DCMAKE_FIND_ROOT_PATH_MODE_PROGRAM=NEVER)
+    -DCMAKE_PREFIX_PATH=${PREFIX} ${restrict})
 run(${CMAKE_COMMAND} --build ${BUILD})
 
+if(NOT SHARED)
+  message(STATUS "built ${SOURCE} against the static package ${PREFIX}")
+  return()
+endif()
 if(NOT GENERATOR STREQUAL "Ninja")
   message(STATUS "built ${SOURCE}; (the header and library check needs the Ninja generator)")
   return()
