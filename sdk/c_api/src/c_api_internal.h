@@ -147,9 +147,9 @@ struct CStatus {
   std::string message;
 };
 
-/// Passes a message to the installed log callback (ss_set_log_callback) if its level is enabled.
+/// Logs to the SDK's process-wide sink (softshell/log.h), which is the C log callback when one is
+/// installed (ss_set_log_callback). `level`: SS_LOG_*.
 void log(int32_t level, std::string_view message) noexcept;
-bool log_enabled(int32_t level) noexcept;
 
 // ------------------------------------------------------------------------------------------------
 // Arguments in, buffers out

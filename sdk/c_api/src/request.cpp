@@ -1,16 +1,35 @@
 // C ABI: deformation requests and the interaction helpers that fill them (floor contact, grabs).
-// Requests are checked against a geometry where they are solved (the SDK's validator, called by
-// the service); here only what the C types cannot express is refused (NULL, NaN, negative index).
+// Each element is checked when it is added by the SDK's one request validator
+// (request_validation.h: the same rules and messages as the service); what needs the geometry
+// (indices in range, points on the surface) is checked when the request is solved.
 
-#include <cmath>
 #include <string>
 #include <vector>
 
 #include "c_api_internal.h"
+#include "softshell/request_validation.h"
 #include "softshell/softshell_c_bridge.h"
 
 using namespace softshell;         // NOLINT(google-build-using-namespace): a .cpp of entry points
 using namespace softshell::c_api;  // NOLINT(google-build-using-namespace)
+
+namespace {
+
+// A vector that becomes part of a request: only converted here; `add_valid` checks the element.
+Vec3 request_vec(const ss_vec3* v, const char* argument) {
+  required(v, argument);
+  return Vec3(v->x, v->y, v->z);
+}
+
+// Appends an element to a request after the SDK's request validator has accepted it (the
+// geometry is not known yet: indices are checked against it when the request is solved).
+template <class Element>
+void add_valid(std::vector<Element>& elements, Element element) {
+  validate(element, elements.size(), RequestContext{}).value();
+  elements.push_back(std::move(element));
+}
+
+}  // namespace
 
 extern "C" {
 
@@ -35,24 +54,21 @@ ss_status ss_request_add_vertex_constraint(ss_request* request, int32_t index, u
                                            const ss_vec3* displacement) {
   return guard("ss_request_add_vertex_constraint", [&] {
     const auto r = live(request, "request");
-    if (index < 0) fail(ErrorCode::kInvalidArgument, "control point index must not be negative");
-    if (mask == 0 || mask > 7) fail(ErrorCode::kInvalidArgument, "mask must be 1..7 (1 = x, 2 = y, 4 = z)");
-    r->vertex_constraints.push_back({index, mask, vec(displacement, "displacement")});
+    add_valid(r->vertex_constraints, {index, mask, request_vec(displacement, "displacement")});
   });
 }
 
 ss_status ss_request_add_force(ss_request* request, int32_t index, const ss_vec3* force) {
   return guard("ss_request_add_force", [&] {
     const auto r = live(request, "request");
-    if (index < 0) fail(ErrorCode::kInvalidArgument, "control point index must not be negative");
-    r->forces.push_back({index, vec(force, "force")});
+    add_valid(r->forces, {index, request_vec(force, "force")});
   });
 }
 
 ss_status ss_request_add_surface_force(ss_request* request, const ss_surface_point* p, const ss_vec3* force) {
   return guard("ss_request_add_surface_force", [&] {
     const auto r = live(request, "request");
-    r->surface_forces.push_back({point(p, "point"), vec(force, "force")});
+    add_valid(r->surface_forces, {point(p, "point"), request_vec(force, "force")});
   });
 }
 
@@ -62,10 +78,10 @@ ss_status ss_request_add_limit_constraint(ss_request* request, const ss_surface_
     const auto r = live(request, "request");
     LimitConstraint c;
     c.point = point(p, "point");
-    c.displacement = vec(displacement, "displacement");
-    if (du_displacement) c.du_displacement = vec(du_displacement, "du_displacement");
-    if (dv_displacement) c.dv_displacement = vec(dv_displacement, "dv_displacement");
-    r->limit_constraints.push_back(c);
+    c.displacement = request_vec(displacement, "displacement");
+    if (du_displacement) c.du_displacement = request_vec(du_displacement, "du_displacement");
+    if (dv_displacement) c.dv_displacement = request_vec(dv_displacement, "dv_displacement");
+    add_valid(r->limit_constraints, std::move(c));
   });
 }
 
@@ -78,24 +94,27 @@ ss_status ss_request_add_lagrange_constraint(ss_request* request, const int32_t*
     required(coefficients, "coefficients");
     LagrangeConstraint c;
     for (int32_t k = 0; k < count; ++k) {
-      if (indices[k] < 0) fail(ErrorCode::kInvalidArgument, "control point index must not be negative");
       c.indices.push_back(indices[k]);
-      c.coefficients.push_back(vec(&coefficients[k], "coefficients"));
+      c.coefficients.push_back(request_vec(&coefficients[k], "coefficients"));
     }
-    c.values = vec(values, "values");
-    r->lagrange_constraints.push_back(std::move(c));
+    c.values = request_vec(values, "values");
+    add_valid(r->lagrange_constraints, std::move(c));
   });
 }
 
 ss_status ss_request_set_surface_load(ss_request* request, const ss_vec3* load_per_area) {
-  return guard("ss_request_set_surface_load",
-               [&] { live(request, "request")->surface_load = vec(load_per_area, "load_per_area"); });
+  return guard("ss_request_set_surface_load", [&] {
+    const auto r = live(request, "request");
+    const Vec3 load = request_vec(load_per_area, "load_per_area");
+    validate_loads(load, r->pressure).value();
+    r->surface_load = load;
+  });
 }
 
 ss_status ss_request_set_pressure(ss_request* request, double pressure) {
   return guard("ss_request_set_pressure", [&] {
     const auto r = live(request, "request");
-    if (!std::isfinite(pressure)) fail(ErrorCode::kInvalidArgument, "pressure must be finite");
+    validate_loads(r->surface_load, pressure).value();
     r->pressure = pressure;
   });
 }

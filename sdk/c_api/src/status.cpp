@@ -1,12 +1,12 @@
 // Version, statuses, the error guard, the log callback, and the struct layouts the bindings rely on.
 
-#include <atomic>
 #include <cstddef>
 #include <mutex>
 #include <string>
 #include <string_view>
 
 #include "c_api_internal.h"
+#include "softshell/log.h"
 #include "softshell/softshell_c_bridge.h"
 
 // The layouts that C, C# (P/Invoke, sequential layout; bindings/csharp/Softshell.cs) and Unreal
@@ -22,6 +22,10 @@ static_assert(sizeof(ss_pick) == 184 && offsetof(ss_pick, estimate) == 8 && offs
 static_assert(sizeof(ss_grab_options) == 8 && sizeof(ss_floor_options) == 16);
 static_assert(sizeof(ss_remote_options) == 16);
 static_assert(sizeof(ss_geometry_status) == 24 && offsetof(ss_geometry_status, progress) == 16);
+// SS_LOG_* are softshell::LogLevel's values.
+static_assert(static_cast<int>(softshell::LogLevel::kDebug) == SS_LOG_DEBUG &&
+              static_cast<int>(softshell::LogLevel::kWarning) == SS_LOG_WARNING &&
+              static_cast<int>(softshell::LogLevel::kOff) == SS_LOG_OFF);
 
 // The header's version macros follow the project's version (CMakeLists.txt).
 static_assert(SS_VERSION_MAJOR == SOFTSHELL_VERSION_MAJOR && SS_VERSION_MINOR == SOFTSHELL_VERSION_MINOR &&
@@ -35,11 +39,14 @@ namespace {
 
 thread_local std::string g_message;  // NOLINT(cppcoreguidelines-avoid-non-const-global-variables)
 
+// The C log callback. It is reached through the SDK's process-wide log sink (softshell/log.h),
+// so that the C ABI's own messages, the embedded server's and the SDK's (failed assertions,
+// internal errors) all arrive there.
 struct LogTarget {
   std::mutex mutex;
   ss_log_callback callback = nullptr;
   void* user_data = nullptr;
-  std::atomic<int32_t> min_level{SS_LOG_OFF};
+  int32_t min_level = SS_LOG_OFF;
 };
 
 LogTarget& log_target() {
@@ -47,24 +54,26 @@ LogTarget& log_target() {
   return *target;
 }
 
-}  // namespace
-
-bool log_enabled(int32_t level) noexcept {
-  const int32_t min = log_target().min_level.load(std::memory_order_relaxed);
-  return min != SS_LOG_OFF && level >= min;
-}
-
-void log(int32_t level, std::string_view message) noexcept {
-  if (!log_enabled(level)) return;
+// The SDK sink while a C callback is installed.
+void deliver_to_c(LogLevel level, std::string_view message) {
   try {
     const std::string text(message);
     LogTarget& t = log_target();
     std::lock_guard lock(t.mutex);  // one message at a time, and never after the callback was removed
-    if (t.callback != nullptr && level >= t.min_level.load(std::memory_order_relaxed)) {
-      t.callback(level, text.c_str(), t.user_data);
-    }
+    const auto l = static_cast<int32_t>(level);
+    if (t.callback != nullptr && l >= t.min_level) t.callback(l, text.c_str(), t.user_data);
   } catch (...) {
     // Out of memory while logging: the message is dropped.
+  }
+}
+
+}  // namespace
+
+void log(int32_t level, std::string_view message) noexcept {
+  try {
+    sdk_logger().log(static_cast<LogLevel>(level), message);
+  } catch (...) {
+    // A sink that throws (or no memory to copy it): the message is dropped.
   }
 }
 
@@ -74,21 +83,13 @@ ss_status guard(const char* function, const std::function<void()>& fn) noexcept 
       fn();
       g_message.clear();
       return SS_OK;
-    } catch (const CStatus& s) {
+    } catch (const CStatus& s) {  // the C ABI's own statuses (buffer too small, not ready)
       g_message = std::string(function) + ": " + s.message;
       return s.status;
-    } catch (const Exception& e) {
-      g_message = std::string(function) + ": " + e.what();
-      return static_cast<ss_status>(e.code());
-    } catch (const std::bad_alloc&) {
-      g_message = std::string(function) + ": out of memory";
-      return SS_RESOURCE_EXHAUSTED;
-    } catch (const std::exception& e) {
-      g_message = std::string(function) + ": internal error: " + e.what();
-      return SS_INTERNAL;
     } catch (...) {
-      g_message = std::string(function) + ": internal error (unknown exception)";
-      return SS_INTERNAL;
+      const Error error = error_from(std::current_exception());
+      g_message = std::string(function) + ": " + error.message;
+      return static_cast<ss_status>(error.code);
     }
   } catch (...) {
     // Even storing the message failed (out of memory).
@@ -135,10 +136,17 @@ ss_status ss_set_log_callback(ss_log_callback callback, void* user_data, int32_t
                       "min_level must be SS_LOG_DEBUG (0) .. SS_LOG_OFF (4), got " + std::to_string(min_level));
     }
     auto& t = softshell::c_api::log_target();
-    std::lock_guard lock(t.mutex);
-    t.callback = callback;
-    t.user_data = user_data;
-    t.min_level.store(callback == nullptr ? SS_LOG_OFF : min_level, std::memory_order_relaxed);
+    {
+      std::lock_guard lock(t.mutex);
+      t.callback = callback;
+      t.user_data = user_data;
+      t.min_level = callback == nullptr ? SS_LOG_OFF : min_level;
+    }
+    if (callback == nullptr) {
+      softshell::set_log_sink({}, softshell::LogLevel::kOff);
+    } else {
+      softshell::set_log_sink(softshell::c_api::deliver_to_c, static_cast<softshell::LogLevel>(min_level));
+    }
   });
 }
 

@@ -1,5 +1,7 @@
 #include "softshell/result.h"
 
+#include "softshell/log.h"
+
 namespace softshell {
 
 std::string_view to_string(ErrorCode code) noexcept {
@@ -18,6 +20,29 @@ std::string_view to_string(ErrorCode code) noexcept {
     case ErrorCode::kInternal: return "internal";
   }
   return "unknown";
+}
+
+Error error_from(std::exception_ptr exception, std::string_view doing) noexcept {
+  const std::string while_doing = doing.empty() ? std::string() : " while " + std::string(doing);
+  Error error;
+  try {
+    try {
+      std::rethrow_exception(exception);
+    } catch (const Exception& e) {
+      error = e.error();
+    } catch (const std::bad_alloc&) {
+      return Error{ErrorCode::kResourceExhausted, "out of memory" + while_doing};
+    } catch (const std::exception& e) {
+      error = Error{ErrorCode::kInternal, "internal error" + while_doing + ": " + e.what()};
+    } catch (...) {
+      error = Error{ErrorCode::kInternal, "internal error" + while_doing + " (an unknown exception)"};
+    }
+    if (error.code == ErrorCode::kInternal) sdk_logger().error(error.message);
+    return error;
+  } catch (...) {
+    // Even building the message failed: there is no memory left.
+    return Error{ErrorCode::kResourceExhausted, {}};
+  }
 }
 
 }  // namespace softshell

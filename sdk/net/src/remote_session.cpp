@@ -2,10 +2,8 @@
 
 #include <charconv>
 #include <condition_variable>
-#include <deque>
 #include <functional>
 #include <mutex>
-#include <thread>
 
 #include <httplib.h>
 
@@ -51,17 +49,14 @@ struct RemoteSession::Impl {
   };
 
   Impl(std::string_view u, RemoteSessionOptions o) : url(u), options(std::move(o)) {
-    const int threads = std::max(1, options.async_threads);
-    for (int i = 0; i < threads; ++i) workers.emplace_back([this] { work(); });
+    executor = options.executor ? options.executor : std::make_shared<ThreadPool>(std::max(1, options.async_threads));
   }
 
+  // Waits for the deform_async calls still running (on the host's executor they are not ours to
+  // join).
   ~Impl() {
-    {
-      std::lock_guard lock(task_mu);
-      stopping = true;
-    }
-    task_cv.notify_all();
-    for (auto& t : workers) t.join();
+    std::unique_lock lock(task_mu);
+    task_cv.wait(lock, [&] { return in_flight == 0; });
   }
 
   // --- connections -------------------------------------------------------------------------
@@ -154,27 +149,18 @@ struct RemoteSession::Impl {
     return decode_result(*reply);
   }
 
-  // --- deform_async workers ----------------------------------------------------------------
+  // --- deform_async calls -------------------------------------------------------------------
   void submit(std::function<void()> task) {
     {
       std::lock_guard lock(task_mu);
-      tasks.push_back(std::move(task));
+      ++in_flight;
     }
-    task_cv.notify_one();
-  }
-
-  void work() {
-    for (;;) {
-      std::function<void()> task;
-      {
-        std::unique_lock lock(task_mu);
-        task_cv.wait(lock, [&] { return stopping || !tasks.empty(); });
-        if (tasks.empty()) return;  // stopping, and every submitted call has run
-        task = std::move(tasks.front());
-        tasks.pop_front();
-      }
+    executor->post([this, task = std::move(task)] {
       task();
-    }
+      std::lock_guard lock(task_mu);
+      --in_flight;
+      task_cv.notify_all();
+    });
   }
 
   std::string url;
@@ -183,11 +169,10 @@ struct RemoteSession::Impl {
   std::mutex pool_mu;
   std::vector<std::unique_ptr<httplib::Client>> idle;
 
+  std::shared_ptr<Executor> executor;  // runs deform_async calls
   std::mutex task_mu;
   std::condition_variable task_cv;
-  std::deque<std::function<void()>> tasks;
-  bool stopping = false;
-  std::vector<std::thread> workers;
+  int in_flight = 0;  // deform_async calls posted and not finished (under task_mu)
 };
 
 RemoteSession::RemoteSession(std::string_view url, RemoteSessionOptions options)
@@ -320,6 +305,18 @@ Result<LimitComb> RemoteSession::limit_comb(const GeomId& id, const SurfacePoint
   if (reply->status != 200) return Impl::server_error(*reply);
   return is_binary(reply->content_type) ? wire::decode_limit_comb_binary(reply->body, point)
                                         : wire::decode_limit_comb_json(reply->body);
+}
+
+Result<StressField> RemoteSession::stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) {
+  const std::string path = geometry_path(id) + "/results/" + std::to_string(res_id) + "/stresses";
+  auto reply = query.level > 0 ? impl_->get(path + "?level=" + std::to_string(query.level) +
+                                                "&yield_strength=" + number_text(query.yield_strength),
+                                            wire::kJsonMediaType)
+                               : impl_->post(path, wire::encode_stress_query_json(query), wire::Format::kJson,
+                                             wire::kJsonMediaType);
+  if (!reply) return reply.error();
+  if (reply->status != 200) return Impl::server_error(*reply);
+  return wire::decode_stress_field_json(reply->body);
 }
 
 }  // namespace softshell

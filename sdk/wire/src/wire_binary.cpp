@@ -65,16 +65,8 @@ void check_consumed(const ByteReader& in, std::string_view body, const char* wha
 }
 
 template <class Fn>
-auto decoding(Fn&& fn) -> Result<decltype(fn())> {
-  try {
-    return fn();
-  } catch (const Exception& e) {
-    return e.error();
-  } catch (const std::bad_alloc&) {
-    return Error{ErrorCode::kResourceExhausted, "out of memory while decoding the body"};
-  } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal, std::string("internal error while decoding: ") + e.what()};
-  }
+auto decoding(Fn&& fn) {
+  return capture(std::forward<Fn>(fn), "decoding the body");
 }
 
 }  // namespace

@@ -236,19 +236,18 @@ SurfacePoint surface_point(const json& obj, const std::string& path, std::string
   return p;
 }
 
+// The parser's own errors are the client's: invalid JSON. Everything else as `capture` says.
 template <class Fn>
-auto decoding(Fn&& fn) -> Result<decltype(fn())> {
-  try {
-    return fn();
-  } catch (const Exception& e) {
-    return e.error();
-  } catch (const json::exception& e) {
-    return Error{ErrorCode::kInvalidArgument, std::string("invalid JSON: ") + e.what()};
-  } catch (const std::bad_alloc&) {
-    return Error{ErrorCode::kResourceExhausted, "out of memory while decoding the body"};
-  } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal, std::string("internal error while decoding: ") + e.what()};
-  }
+auto decoding(Fn&& fn) {
+  return capture(
+      [&] {
+        try {
+          return fn();
+        } catch (const json::exception& e) {
+          fail(ErrorCode::kInvalidArgument, std::string("invalid JSON: ") + e.what());
+        }
+      },
+      "decoding the body");
 }
 
 void write_geometry_fields(JsonOut& out, const ControlMesh& mesh, const Material& material) {
@@ -714,6 +713,148 @@ Result<LimitComb> decode_limit_comb_json(std::string_view body) {
       for (size_t i = 0; i < w.size(); ++i) out->push_back(number(w[i], item(key, i)));
     }
     return c;
+  });
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stresses (extension)
+
+namespace {
+
+void write_stress_sample(JsonOut& out, const StressSample& s) {
+  out.raw("{\"face\":").integer(s.point.face).raw(",\"subface\":").integer(s.point.subface);
+  out.raw(",\"u\":").number(s.point.u).raw(",\"v\":").number(s.point.v);
+  out.raw(",\"position\":").vec3(s.position);
+  out.raw(",\"membrane_force\":").vec3(s.membrane_force).raw(",\"bending_moment\":").vec3(s.bending_moment);
+  out.raw(",\"von_mises_top\":").number(s.von_mises_top).raw(",\"von_mises_bottom\":").number(s.von_mises_bottom);
+  out.raw(",\"von_mises\":").number(s.von_mises()).raw("}");
+}
+
+StressSample stress_sample(const json& j, const std::string& path) {
+  object(j, path);
+  StressSample s;
+  s.point = surface_point(j, path, "face");
+  s.position = vec3(require(j, "position", path), join(path, "position"));
+  s.membrane_force = vec3(require(j, "membrane_force", path), join(path, "membrane_force"));
+  s.bending_moment = vec3(require(j, "bending_moment", path), join(path, "bending_moment"));
+  s.von_mises_top = number(require(j, "von_mises_top", path), join(path, "von_mises_top"));
+  s.von_mises_bottom = number(require(j, "von_mises_bottom", path), join(path, "von_mises_bottom"));
+  return s;
+}
+
+}  // namespace
+
+std::string encode_stress_query_json(const StressQuery& query) {
+  JsonOut out;
+  out.raw("{\"yield_strength\":").number(query.yield_strength);
+  if (query.level > 0) {
+    out.raw(",\"level\":").integer(query.level);
+  } else {
+    out.raw(",\"points\":").array(query.points, [&](const SurfacePoint& p) {
+      out.raw("{\"face\":").integer(p.face).raw(",\"subface\":").integer(p.subface);
+      out.raw(",\"u\":").number(p.u).raw(",\"v\":").number(p.v).raw("}");
+    });
+  }
+  out.raw("}");
+  return out.take();
+}
+
+Result<StressQuery> decode_stress_query_json(std::string_view body) {
+  return decoding([&]() -> StressQuery {
+    const json root = parse(body);
+    object(root, "");
+    known_keys(root, {"level", "points", "yield_strength"}, "");
+    StressQuery q;
+    if (const json* y = find(root, "yield_strength")) {
+      q.yield_strength = number(*y, "yield_strength");
+      if (q.yield_strength < 0.0) bad("'yield_strength' must be >= 0 (Pa; 0 = unknown)");
+    }
+    if (const json* level = find(root, "level")) q.level = static_cast<int>(integer(*level, "level", 1, StressQuery::kMaxLevel));
+    if (const json* points = find(root, "points")) {
+      if (q.level) bad("give either 'level' or 'points', not both");
+      array(*points, "points");
+      if (points->size() > StressQuery::kMaxPoints) {
+        bad("'points' has " + std::to_string(points->size()) + " entries, at most " +
+            std::to_string(StressQuery::kMaxPoints) + " are served at once");
+      }
+      for (size_t i = 0; i < points->size(); ++i) {
+        const std::string path = item("points", i);
+        object((*points)[i], path);
+        known_keys((*points)[i], {"face", "subface", "u", "v"}, path);
+        q.points.push_back(surface_point((*points)[i], path, "face"));
+      }
+    } else if (!q.level) {
+      bad("a stress query needs 'level' (1.." + std::to_string(StressQuery::kMaxLevel) + ") or 'points'");
+    }
+    return q;
+  });
+}
+
+std::string encode_stress_field_json(const StressField& field, bool with_points) {
+  JsonOut out;
+  out.raw("{\"res_id\":").integer(field.res_id).raw(",\"yield_strength\":").number(field.yield_strength);
+  out.raw(",\"exceeds_yield\":").raw(field.exceeds_yield ? "true" : "false");
+  out.raw(",\"max\":");
+  write_stress_sample(out, field.max);
+  // Per point: parallel arrays (compact, and typed arrays for a browser).
+  auto column = [&](const char* name, auto&& value) {
+    out.raw(",\"").raw(name).raw("\":[");
+    for (size_t i = 0; i < field.samples.size(); ++i) {
+      if (i) out.raw(",");
+      value(field.samples[i]);
+    }
+    out.raw("]");
+  };
+  if (with_points) {
+    column("points", [&](const StressSample& s) {
+      out.raw("[").integer(s.point.face).raw(",").integer(s.point.subface).raw(",").number(s.point.u).raw(",");
+      out.number(s.point.v).raw("]");
+    });
+  }
+  column("von_mises", [&](const StressSample& s) { out.number(s.von_mises()); });
+  column("von_mises_top", [&](const StressSample& s) { out.number(s.von_mises_top); });
+  column("von_mises_bottom", [&](const StressSample& s) { out.number(s.von_mises_bottom); });
+  column("membrane_force", [&](const StressSample& s) { out.vec3(s.membrane_force); });
+  column("bending_moment", [&](const StressSample& s) { out.vec3(s.bending_moment); });
+  out.raw("}");
+  return out.take();
+}
+
+Result<StressField> decode_stress_field_json(std::string_view body) {
+  return decoding([&]() -> StressField {
+    const json root = parse(body);
+    object(root, "");
+    StressField f;
+    f.res_id = static_cast<uint32_t>(integer(require(root, "res_id", ""), "res_id", 0, std::numeric_limits<uint32_t>::max()));
+    f.yield_strength = number(require(root, "yield_strength", ""), "yield_strength");
+    const json& exceeds = require(root, "exceeds_yield", "");
+    if (!exceeds.is_boolean()) bad("'exceeds_yield' must be a boolean");
+    f.exceeds_yield = exceeds.get<bool>();
+    f.max = stress_sample(require(root, "max", ""), "max");
+    const json& top = array(require(root, "von_mises_top", ""), "von_mises_top");
+    const json& bottom = array(require(root, "von_mises_bottom", ""), "von_mises_bottom");
+    const json& membrane = array(require(root, "membrane_force", ""), "membrane_force");
+    const json& bending = array(require(root, "bending_moment", ""), "bending_moment");
+    const json* points = find(root, "points");
+    const size_t n = top.size();
+    if (bottom.size() != n || membrane.size() != n || bending.size() != n || (points && array(*points, "points").size() != n)) {
+      bad("the per-point arrays of a stress answer must all have the same length");
+    }
+    f.samples.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+      StressSample& s = f.samples[i];
+      s.von_mises_top = number(top[i], item("von_mises_top", i));
+      s.von_mises_bottom = number(bottom[i], item("von_mises_bottom", i));
+      s.membrane_force = vec3(membrane[i], item("membrane_force", i));
+      s.bending_moment = vec3(bending[i], item("bending_moment", i));
+      if (points) {
+        const json& p = (*points)[i];
+        const std::string path = item("points", i);
+        if (!p.is_array() || p.size() != 4) bad(where(path) + " must be [face, subface, u, v]");
+        s.point = SurfacePoint{index(p[0], path), index(p[1], path), number(p[2], path), number(p[3], path)};
+      }
+    }
+    return f;
   });
 }
 

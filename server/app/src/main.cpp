@@ -105,6 +105,7 @@ int main(int argc, char** argv) {
   }
   service_options.precompute_threads = threads;
   const service::Logger logger{level, service::stderr_log_sink()};
+  set_log_sink(logger.sink, level);  // the SDK's own reports (internal errors, failed assertions)
   service_options.logger = logger;
   http_options.logger = logger;
   http_options.reserved_connections = std::min(http_options.reserved_connections, http_options.max_connections / 2);

@@ -9,8 +9,9 @@
 
 #include <Eigen/Dense>
 
+#include "softshell/executor.h"
+
 #include "kirchhoff_love.h"
-#include "parallel.h"
 #include "quadrature.h"
 #include "request_check.h"
 
@@ -350,7 +351,7 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
 
   // Elements in fixed-size batches: computed in parallel, accumulated in face order, so K is
   // bit-for-bit the same for any number of threads.
-  const int threads = internal::resolve_threads(options.threads);
+  Executor& executor = options.executor ? *options.executor : *default_executor();
   constexpr size_t kBatch = 128;
   std::vector<Element> batch(kBatch);
   Eigen::VectorXd area_weights = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(n));
@@ -360,9 +361,9 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
   for (size_t begin = 0; begin < work.size(); begin += kBatch) {
     if (options.cancel && options.cancel->load()) fail(ErrorCode::kCancelled, "precomputation cancelled");
     const size_t count = std::min(kBatch, work.size() - begin);
-    internal::parallel_for(0, static_cast<int64_t>(count), threads, [&](int64_t i) {
+    executor.parallel_for(0, static_cast<int64_t>(count), [&](int64_t i) {
       integrate_element(evaluator, material, quad, work[begin + static_cast<size_t>(i)], batch[static_cast<size_t>(i)]);
-    });
+    }, options.threads);
     for (size_t i = 0; i < count; ++i) {
       const Element& e = batch[i];
       const auto m = e.indices.size();

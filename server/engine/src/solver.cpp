@@ -86,7 +86,7 @@ void add_row(Row row, std::vector<Row>& rows) {
 }
 
 Problem build_problem(const ShellModel& model, const DeformationRequest& request) {
-  internal::check_request(model, request);
+  internal::check_constraints(model, request);
   const int32_t ndof = model.num_dofs();
   Problem p;
   p.fixed_value = Eigen::VectorXd::Zero(ndof);

@@ -72,6 +72,26 @@ StressSample evaluate_stress(const ShellModel& model, const Eigen::VectorXd& dis
   return out.front();
 }
 
+std::vector<StressSample> evaluate_stresses(const ShellModel& model, const Eigen::VectorXd& displacement,
+                                            const std::vector<SurfacePoint>& points) {
+  check_size(model, displacement);
+  // Points grouped by (face, sub-face), remembering where each goes.
+  std::map<std::pair<int32_t, int32_t>, std::pair<std::vector<std::array<double, 2>>, std::vector<size_t>>> groups;
+  for (size_t i = 0; i < points.size(); ++i) {
+    model.evaluator().check(points[i]).value();
+    auto& [uvs, slots] = groups[{points[i].face, points[i].subface}];
+    uvs.push_back({points[i].u, points[i].v});
+    slots.push_back(i);
+  }
+  std::vector<StressSample> out(points.size()), samples;
+  for (const auto& [key, group] : groups) {
+    samples.clear();
+    face_stresses(model, displacement, key.first, key.second, group.first, samples);
+    for (size_t k = 0; k < samples.size(); ++k) out[group.second[k]] = samples[k];
+  }
+  return out;
+}
+
 StressSummary max_stress(const ShellModel& model, const Eigen::VectorXd& displacement, double yield_strength) {
   check_size(model, displacement);
   // Group the quadrature points by (face, sub-face) so each face's basis is set up once.

@@ -120,8 +120,11 @@ typedef void (*ss_log_callback)(int32_t level, const char* message, void* user_d
  *  receives (SS_LOG_*; SS_LOG_OFF silences it). What is logged: the in-process server's messages
  *  (precomputations started, finished and failed, failed solves; with a listener, its requests),
  *  handles destroyed twice, and the errors of operations destroyed before anybody read them.
- *  Errors of calls are still returned as statuses, not logged. Takes effect at once, for every
- *  session; SS_INVALID_ARGUMENT for a level outside SS_LOG_DEBUG..SS_LOG_OFF. */
+ *  Errors of calls are still returned as statuses; internal errors (bugs) are also logged. It
+ *  becomes the SDK's process-wide log sink (softshell/log.h, `set_log_sink`; it replaces a sink a
+ *  C++ host installed there). Takes effect at once, for every session; after it returns with
+ *  another callback (or NULL) the old one is not called again. SS_INVALID_ARGUMENT for a level
+ *  outside SS_LOG_DEBUG..SS_LOG_OFF. */
 SS_API ss_status ss_set_log_callback(ss_log_callback callback, void* user_data, int32_t min_level);
 
 /* ---------------------------------------------------------------------------------------------

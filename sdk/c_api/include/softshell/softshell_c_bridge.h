@@ -22,8 +22,8 @@ SS_API ss_session* wrap_session(std::shared_ptr<Session> session);
 /// NULL or a handle that is not a live session.
 SS_API std::shared_ptr<Session> session_of(const ss_session* handle);
 
-/// Passes a message to the log callback installed with `ss_set_log_callback` (if any, and if
-/// `level`, one of SS_LOG_*, is at or above its threshold). Thread-safe; never throws.
+/// Logs a message (level: SS_LOG_*) to the SDK's process-wide sink (softshell/log.h), which is the
+/// C log callback when `ss_set_log_callback` installed one. Thread-safe; never throws.
 SS_API void log_message(int32_t level, std::string_view message) noexcept;
 
 /// Runs `fn` and returns SS_OK, or the status of what it threw (`softshell::Exception` -> its code,

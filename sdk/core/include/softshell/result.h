@@ -2,15 +2,20 @@
 /// \file
 /// \brief Error codes, `Error`, and `Result<T>`: how every fallible softshell call reports failure.
 ///
-/// softshell has one error policy:
+/// softshell has one error policy, in three tiers:
 ///  - bad input from outside (files, network, user data) -> a `Result<T>` holding an `Error`
-///    whose message tells a person what was wrong and what to do;
-///  - the same errors travel inside the library as `softshell::Exception` and are turned into a
-///    `Result` (or an HTTP status, or a C status code) at the public boundary;
+///    whose message tells a person what was wrong and what to do. Inside the library the same
+///    errors travel as `softshell::Exception`; `capture` (one place: `error_from`) turns them into
+///    a `Result` at the public boundary, and the HTTP layer and the C ABI map that to a status;
+///  - broken preconditions (a bug in the caller or in softshell) -> `SOFTSHELL_ASSERT`
+///    (softshell/assert.h), routed to a replaceable handler;
 ///  - `Result<T>::value()` on an error throws that `Exception`, so code that prefers exceptions can
 ///    simply call `.value()`.
 
 #include <cstdint>
+#include <exception>
+#include <new>
+#include <type_traits>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -59,6 +64,13 @@ class Exception : public std::runtime_error {
 /// Throws `Exception(code, message)`; a one-liner for validation code.
 [[noreturn]] inline void fail(ErrorCode code, const std::string& message) { throw Exception(code, message); }
 
+template <class T>
+class Result;
+template <class T>
+inline constexpr bool is_result_v = false;
+template <class T>
+inline constexpr bool is_result_v<Result<T>> = true;
+
 /// A value or an error. Cheap to move; check with `ok()` / `operator bool` before `value()`.
 template <class T>
 class [[nodiscard]] Result {
@@ -106,23 +118,27 @@ class [[nodiscard]] Result<void> {
   bool ok_ = true;
 };
 
-/// Runs `fn` and converts a thrown softshell::Exception (or std::bad_alloc, or any other
-/// std::exception) into a `Result`. Used at public boundaries.
+/// The error an exception stands for: a softshell::Exception its own error; std::bad_alloc
+/// kResourceExhausted ("out of memory while <doing>"); anything else kInternal, which is a bug and
+/// is also reported to the SDK log sink (softshell/log.h). `doing` (e.g. "decoding the body")
+/// completes the messages; may be empty. The one translation of exceptions in softshell.
+Error error_from(std::exception_ptr exception, std::string_view doing = {}) noexcept;
+
+/// Runs `fn` and returns its value, or the error of what it threw (`error_from`). `fn` may
+/// return a value, a `Result` or nothing. Used at public boundaries.
 template <class Fn>
-auto capture(Fn&& fn) -> Result<decltype(fn())> {
+auto capture(Fn&& fn, std::string_view doing = {}) noexcept {
+  using R = decltype(fn());
+  using Out = std::conditional_t<is_result_v<R>, R, Result<R>>;
   try {
-    if constexpr (std::is_void_v<decltype(fn())>) {
+    if constexpr (std::is_void_v<R>) {
       fn();
-      return {};
+      return Out{};
     } else {
-      return fn();
+      return Out(fn());
     }
-  } catch (const Exception& e) {
-    return e.error();
-  } catch (const std::bad_alloc&) {
-    return Error{ErrorCode::kResourceExhausted, "out of memory"};
-  } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal, std::string("internal error: ") + e.what()};
+  } catch (...) {
+    return Out(error_from(std::current_exception(), doing));
   }
 }
 

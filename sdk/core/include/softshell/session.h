@@ -17,6 +17,7 @@
 #include "softshell/limit_evaluator.h"
 #include "softshell/material.h"
 #include "softshell/result.h"
+#include "softshell/stresses.h"
 
 namespace softshell {
 
@@ -115,6 +116,11 @@ class Session {
 
   /// The limit point and tangents at `point` as combinations of control points.
   virtual Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) = 0;
+
+  /// Stresses of a stored result, computed by the server's engine, at the vertices of a
+  /// tessellation level or at given points (`GET|POST /geometries/{id}/results/{res_id}/stresses`,
+  /// an extension).
+  virtual Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) = 0;
 };
 
 }  // namespace softshell

@@ -7,6 +7,7 @@
 #include <string>
 #include <string_view>
 
+#include "softshell/executor.h"
 #include "softshell/session.h"
 #include "softshell/wire.h"
 
@@ -26,7 +27,11 @@ struct RemoteSessionOptions {
   /// Time allowed for one request/response (a deformation waits for the geometry's
   /// precomputation, so this is generous). `latest_result` adds its `wait` to it.
   std::chrono::milliseconds request_timeout{300000};
-  /// Threads that run `deform_async` calls (each holds one connection while it runs).
+  /// Where `deform_async` calls run (each blocks one thread on the network while it runs). Empty:
+  /// the session's own pool of `async_threads` threads (not the shared default executor, whose
+  /// threads compute).
+  std::shared_ptr<Executor> executor;
+  /// Threads of the session's own pool when `executor` is empty.
   int async_threads = 2;
   /// Idle keep-alive connections kept for reuse.
   int max_idle_connections = 8;
@@ -74,6 +79,7 @@ class RemoteSession final : public Session {
   Result<std::optional<DeformationResult>> latest_result(const GeomId& id, uint32_t have,
                                                          std::chrono::milliseconds wait) override;
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) override;
+  Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) override;
 
  private:
   struct Impl;

@@ -102,6 +102,21 @@ Result<Geometry> decode_geometry_json(std::string_view body);
 /// Upload response bodies: 16 raw id bytes, or `{"geom_id": "<hex>", "status": "..."}`.
 std::string encode_upload_response_binary(const GeomId& id);
 std::string encode_upload_response_json(const GeomId& id, GeometryStatus status);
+// ---------------------------------------------------------------------------------------------
+// Stresses (`GET|POST /geometries/{id}/results/{res_id}/stresses`, an extension)
+
+/// `{"level": L}` or `{"points": [{"face", "subface", "u", "v"}, ...]}`, optionally with
+/// `"yield_strength"` (Pa).
+std::string encode_stress_query_json(const StressQuery& query);
+Result<StressQuery> decode_stress_query_json(std::string_view body);
+/// `{"res_id", "yield_strength", "exceeds_yield", "max": {sample}, "von_mises": [...],
+/// "von_mises_top": [...], "von_mises_bottom": [...], "membrane_force": [[n11, n22, n12], ...],
+/// "bending_moment": [[m11, m22, m12], ...]}`, per point in query order, plus `"points":
+/// [[face, subface, u, v], ...]` when `with_points` (explicit queries echo their points; a level
+/// query's points are the tessellation's vertices, which the client has).
+std::string encode_stress_field_json(const StressField& field, bool with_points);
+Result<StressField> decode_stress_field_json(std::string_view body);
+
 /// Decodes an upload response; `created` is set from the HTTP status (201). The binary layout
 /// carries no status: it is reported as kPrecomputing.
 Result<UploadResult> decode_upload_response_binary(std::string_view body, bool created);
@@ -109,12 +124,6 @@ Result<UploadResult> decode_upload_response_json(std::string_view body, bool cre
 
 // ---------------------------------------------------------------------------------------------
 // Deformation requests (`POST /geometries/{id}/results`)
-
-/// Checks a request for everything that does not need the mesh's limit surface: masks 1..7,
-/// finite numbers, one coefficient triple per Lagrange index, control point indices in
-/// [0, num_control_points), sub-face indices >= 0 and u, v in [0, 1]. kInvalidArgument naming
-/// the first bad field. (Decoders apply the checks that need no vertex count.)
-Result<void> validate_request(const DeformationRequest& request, int32_t num_control_points);
 
 /// Binary request body (three u32 counts first, see PROTOCOL.md). kInvalidArgument if the request
 /// uses JSON-only fields (`!fits_binary_layout()`) or a number is not finite or overflows f32.

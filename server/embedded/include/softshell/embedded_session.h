@@ -57,6 +57,7 @@ class EmbeddedSession final : public Session {
   Result<std::optional<DeformationResult>> latest_result(const GeomId& id, uint32_t have,
                                                          std::chrono::milliseconds wait) override;
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) override;
+  Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) override;
 
  private:
   std::shared_ptr<service::Service> service_;

@@ -13,6 +13,7 @@
 
 #include "softshell/control_mesh.h"
 #include "softshell/deformation.h"
+#include "softshell/executor.h"
 #include "softshell/limit_evaluator.h"
 #include "softshell/material.h"
 #include "softshell/result.h"
@@ -41,7 +42,9 @@ struct QuadratureOptions {
 struct PrecomputeOptions {
   QuadratureOptions quadrature;
   LimitEvaluator::Options evaluator;
-  /// Worker threads for the per-face work; 0 = std::thread::hardware_concurrency(). The result
+  /// Where the per-face work runs (the host's threads); empty = softshell::default_executor().
+  std::shared_ptr<Executor> executor;
+  /// At most this many of the executor's threads work on one build; 0 = all of them. The result
   /// is bit-for-bit the same for every thread count.
   int threads = 0;
   /// Called with the fraction done in [0, 1], from one of the worker threads. May be empty.
@@ -110,7 +113,7 @@ class ShellModel {
   double strain_energy(const Eigen::VectorXd& displacement) const;
 
   /// The load vector (3n) of a request's forces, surface forces, surface load and pressure.
-  /// Throws Exception(kInvalidArgument) for an index or surface point out of range.
+  /// Precondition: the loads pass `validate_request` (asserted: SOFTSHELL_ASSERT).
   Eigen::VectorXd load_vector(const DeformationRequest& request) const;
 
   /// Bytes held (matrix, quadrature, evaluator estimate).

@@ -46,9 +46,11 @@ struct Solution {
 
 /// Solves deformation requests for one model.
 ///
-/// Errors: kInvalidArgument for malformed requests (indices, masks, non-finite numbers, surface
-/// points out of range), kUnprocessable for an undetermined system (a rigid-body motion left
-/// free; the message names it) or contradictory constraints. Never returns NaN.
+/// Precondition: the request passes `validate_request` for this model (the service validates
+/// every request once at its boundary); one that does not fails the engine's SOFTSHELL_ASSERT
+/// (by default an error kInternal naming the bad element).
+/// Errors: kUnprocessable for an undetermined system (a rigid-body motion left free; the message
+/// names it) or contradictory constraints. Never returns NaN.
 ///
 /// Thread-safety: `solve` may be called from many threads at once.
 class Solver {

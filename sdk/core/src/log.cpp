@@ -1,4 +1,4 @@
-#include "softshell/service/log.h"
+#include "softshell/log.h"
 
 #include <unistd.h>
 
@@ -7,8 +7,9 @@
 #include <chrono>
 #include <cstdio>
 #include <ctime>
+#include <mutex>
 
-namespace softshell::service {
+namespace softshell {
 
 std::string_view to_string(LogLevel level) {
   switch (level) {
@@ -60,4 +61,21 @@ LogSink stderr_log_sink() {
   };
 }
 
-}  // namespace softshell::service
+namespace {
+
+std::mutex g_sdk_logger_mu;
+Logger g_sdk_logger{LogLevel::kWarning, {}};
+
+}  // namespace
+
+void set_log_sink(LogSink sink, LogLevel threshold) {
+  std::lock_guard lock(g_sdk_logger_mu);
+  g_sdk_logger = Logger{threshold, std::move(sink)};
+}
+
+Logger sdk_logger() {
+  std::lock_guard lock(g_sdk_logger_mu);
+  return g_sdk_logger;
+}
+
+}  // namespace softshell
