@@ -36,8 +36,8 @@
  * (`ss_session_geometry_status`, `ss_session_limit_comb`, upload) answer at once in-process and
  * take one round trip on a remote session.
  *
- * Not yet in the C ABI: stresses (they come to the C++ `Session` first, then here as
- * `ss_session_stresses`).
+ * Not yet in the C ABI: stresses (the C++ `Session::stresses`, softshell/stresses.h; planned here
+ * as `ss_session_stresses`) and a host task callback for the server's threads.
  */
 #ifndef SOFTSHELL_C_H
 #define SOFTSHELL_C_H
