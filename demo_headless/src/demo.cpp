@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -35,10 +36,17 @@ double percentile(std::vector<double> v, double p) {
   return v[std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5))];
 }
 
+// The shipped mesh: beside the installed program (<bin>/../share/softshell/assets, wherever the
+// prefix was installed or moved to), else in the source tree the program was built from.
 std::filesystem::path default_mesh() {
-  for (const char* dir : {SOFTSHELL_ASSET_DIR, SOFTSHELL_INSTALLED_ASSET_DIR}) {
-    std::filesystem::path p = std::filesystem::path(dir) / "meshes" / "spot_control_mesh.obj";
-    if (std::filesystem::exists(p)) return p;
+  std::vector<std::filesystem::path> dirs;
+  std::error_code ec;
+  const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+  if (!ec) dirs.push_back(exe.parent_path() / SOFTSHELL_INSTALLED_ASSET_DIR_FROM_BIN);
+  dirs.emplace_back(SOFTSHELL_ASSET_DIR);
+  for (const auto& dir : dirs) {
+    std::filesystem::path p = dir / "meshes" / "spot_control_mesh.obj";
+    if (std::filesystem::exists(p, ec)) return p.lexically_normal();
   }
   return "assets/meshes/spot_control_mesh.obj";
 }
@@ -171,6 +179,7 @@ Result<DemoReport> run_demo(const DemoOptions& options) {
     const std::filesystem::path mesh_path = options.mesh.empty() ? default_mesh() : options.mesh;
     ControlMesh mesh = read_obj(mesh_path).value();
     report.mesh = mesh_path.filename().string();
+    report.mesh_path = mesh_path.string();
     report.material = options.material_name;
     report.control_points = mesh.num_vertices();
     report.faces = mesh.num_faces();
@@ -495,6 +504,7 @@ std::string format_summary(const DemoReport& r) {
 std::string format_json(const DemoReport& r) {
   nlohmann::json j = {
       {"mesh", r.mesh},
+      {"mesh_path", r.mesh_path},
       {"server", r.server},
       {"deformations", r.deformations},
       {"precompute_ms", r.precompute_ms},
