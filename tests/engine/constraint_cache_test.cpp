@@ -1,7 +1,7 @@
 // Constraint rows that repeat from request to request (a floor, a held grab, groups the caller
 // names) are cached with the factor: the cached path gives the uncached answer, and the cache
 // entries count against the budget.
-#include <random>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -103,6 +103,38 @@ TEST(ConstraintCache, GroupsNamedByTheCallerAreCachedAtTheirFirstUse) {
     EXPECT_EQ(solution->stats.reused_rows, k == 0 ? 0 : f.floor_rows());
     Solver fresh(f.model, std::make_shared<FactorCache>());
     EXPECT_LT(relative_difference(solution->displacement, fresh.solve(request)->displacement), 1e-11);
+  }
+}
+
+// Many solves at once on one cache, each thread its own grab on the same floor: the blocks are
+// shared and every answer is the serial one.
+TEST(ConstraintCache, ConcurrentSolvesShareTheBlocks) {
+  Floor f;
+  auto cache = std::make_shared<FactorCache>();
+  Solver solver(f.model, cache);
+  ASSERT_TRUE(solver.solve(f.request(1, Vec3(0.0, 0.01, 0.0))).ok());
+  std::vector<Eigen::VectorXd> answers(8);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 8; ++t) {
+    threads.emplace_back([&, t] {
+      for (int k = 0; k < 3; ++k) {
+        auto r = solver.solve(f.request(10 + 9 * t, Vec3(0.0, 0.01 * (k + 1), 0.0)));
+        if (r.ok()) answers[static_cast<size_t>(t)] = r->displacement;
+      }
+    });
+  }
+  for (auto& t : threads) t.join();
+  // The floor's block, and perhaps some floor + grab blocks (when one thread's solves followed
+  // each other, its grab was "the same as last time").
+  EXPECT_GE(cache->stats().constraint_blocks, 1u);
+  EXPECT_LE(cache->stats().constraint_blocks, 9u);
+  EXPECT_GE(cache->stats().constraint_hits, 8u);
+  for (int t = 0; t < 8; ++t) {
+    Solver fresh(f.model, std::make_shared<FactorCache>());
+    auto serial = fresh.solve(f.request(10 + 9 * t, Vec3(0.0, 0.03, 0.0)));
+    ASSERT_TRUE(serial.ok());
+    ASSERT_EQ(answers[static_cast<size_t>(t)].size(), serial->displacement.size()) << t;
+    EXPECT_LT(relative_difference(answers[static_cast<size_t>(t)], serial->displacement), 1e-11) << t;
   }
 }
 

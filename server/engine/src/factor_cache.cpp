@@ -10,6 +10,10 @@ namespace softshell::engine {
 using internal::ConstraintBlock;
 using internal::Factorization;
 
+namespace {
+constexpr size_t kMaxBlocksPerFactor = 32;
+}  // namespace
+
 FactorCache::FactorCache(size_t budget_bytes) : impl_(std::make_unique<Impl>()) { impl_->budget = budget_bytes; }
 FactorCache::~FactorCache() = default;
 
@@ -188,6 +192,18 @@ void FactorCache::Impl::insert_block(std::shared_ptr<const ConstraintBlock> bloc
   it->second.block = std::move(block);
   it->second.last_use = ++clock;
   block_bytes += size;
+  // At most kMaxBlocksPerFactor per factor (every solve on it looks at all of them).
+  size_t count = 0;
+  auto oldest = blocks.end();
+  for (auto b = blocks.lower_bound({it->first.first, 0}); b != blocks.end() && b->first.first == it->first.first; ++b) {
+    ++count;
+    if (b != it && (oldest == blocks.end() || b->second.last_use < oldest->second.last_use)) oldest = b;
+  }
+  if (count > kMaxBlocksPerFactor && oldest != blocks.end()) {
+    block_bytes -= oldest->second.block->bytes;
+    blocks.erase(oldest);
+    ++evictions;
+  }
   shrink(nullptr, &it->second);
   if (held() > budget) {  // larger than the whole budget
     block_bytes -= it->second.block->bytes;
