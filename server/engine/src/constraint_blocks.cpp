@@ -132,11 +132,14 @@ std::shared_ptr<const ConstraintBlock> extend_block(const Factorization& factor,
   Eigen::MatrixXd columns, on_pins;
   row_columns(factor, rows, columns, on_pins);
   const Eigen::MatrixXd y = factor.forward(columns);
-  // N and S between the new rows and everything before them.
-  const Eigen::MatrixXd cross = np ? parent.transpose_times(y) : Eigen::MatrixXd(0, ne);  // N(parent, new)
-  const Eigen::MatrixXd n_new = y.transpose() * y;                                         // N(new, new)
-  Eigen::MatrixXd s_pin = on_pins;                                                          // S(pins, new)
-  s_pin.noalias() -= factor.pin_columns().transpose() * y;
+  auto swept = std::make_shared<const SweptColumns>(SweptColumns::compress(y));
+  std::vector<char> reached(static_cast<size_t>(y.rows()), 0);
+  for (int32_t row : swept->rows) reached[static_cast<size_t>(row)] = 1;
+  // N and S between the new rows and everything before them (on the rows the new ones reach).
+  const Eigen::MatrixXd cross = np ? parent.transpose_times(y, &reached) : Eigen::MatrixXd(0, ne);  // N(parent, new)
+  const Eigen::MatrixXd n_new = swept->values.transpose() * swept->values;                          // N(new, new)
+  Eigen::MatrixXd s_pin = on_pins;                                                                   // S(pins, new)
+  if (nq > 0) s_pin.noalias() -= swept->transpose_times(factor.pin_columns()).transpose();
 
   auto block = std::make_shared<ConstraintBlock>();
   block->factor_id = factor.id();
@@ -150,7 +153,7 @@ std::shared_ptr<const ConstraintBlock> extend_block(const Factorization& factor,
   block->hashes.insert(block->hashes.end(), hashes.begin(), hashes.end());
   block->groups = parent.groups;
   block->group_first = parent.group_first;
-  block->groups.push_back(std::make_shared<const SweptColumns>(SweptColumns::compress(y)));
+  block->groups.push_back(std::move(swept));
   block->group_first.push_back(static_cast<int32_t>(np));
 
   // Extend the Cholesky factor of N over the kept rows, one new row at a time.

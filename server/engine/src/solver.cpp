@@ -129,6 +129,90 @@ struct Answer {
   std::vector<char> dependent;  // per row: dropped as dependent by the robust path
 };
 
+// The constraint block of a solve: the cached block on the factor with the most of its rows
+// (found by the hashes of their coefficients, then compared), extended by the rows worth keeping:
+// those the caller names as repeating, and those that were in the previous solve on this factor
+// (in groups by how long they have been there, oldest first). Each extension is cached.
+struct BlockChoice {
+  std::shared_ptr<const ConstraintBlock> block;
+  std::vector<int32_t> row_of;  // block row -> row of the solve
+  int32_t reused = 0, cached = 0;
+};
+
+BlockChoice choose_block(FactorCache::Impl& cache, const Factorization& factor, const Problem& p,
+                         const std::vector<Terms>& terms, const SolveOptions& options) {
+  const size_t nr = terms.size();
+  std::vector<uint64_t> hashes(nr);
+  std::unordered_map<uint64_t, int32_t> first_with(nr);
+  for (size_t r = 0; r < nr; ++r) {
+    hashes[r] = internal::hash_terms(terms[r]);
+    first_with.emplace(hashes[r], static_cast<int32_t>(r));
+  }
+  BlockChoice out;
+  out.block = cache.find_block(factor.id(), first_with);
+  if (out.block) {
+    for (Eigen::Index b = 0; b < out.block->rows(); ++b) {
+      const int32_t r = first_with.at(out.block->hashes[static_cast<size_t>(b)]);
+      if (terms[static_cast<size_t>(r)] != out.block->terms[static_cast<size_t>(b)]) {  // a hash collision
+        out.block = nullptr;
+        out.row_of.clear();
+        break;
+      }
+      out.row_of.push_back(r);
+    }
+  }
+  if (!out.block) out.block = internal::empty_block(factor);
+  out.reused = static_cast<int32_t>(out.block->rows());
+
+  std::vector<uint64_t> since;
+  const uint64_t now = cache.record_rows(factor.id(), hashes, since);
+  std::vector<char> taken(nr, 0);
+  for (int32_t r : out.row_of) taken[static_cast<size_t>(r)] = 1;
+  for (size_t r = 0; r < nr; ++r) {
+    if (first_with.at(hashes[r]) != static_cast<int32_t>(r)) taken[r] = 1;  // a duplicate stays new
+  }
+  std::vector<std::vector<int32_t>> groups;
+  for (const ConstraintGroup& g : options.repeated) {
+    std::vector<int32_t> group;
+    for (size_t r = 0; r < p.rows.size(); ++r) {
+      const Row& row = p.rows[r];
+      const bool inside = (row.limit >= 0 && static_cast<size_t>(row.limit) >= g.first_limit &&
+                           static_cast<size_t>(row.limit) < g.first_limit + g.limit_count) ||
+                          (row.lagrange >= 0 && static_cast<size_t>(row.lagrange) >= g.first_lagrange &&
+                           static_cast<size_t>(row.lagrange) < g.first_lagrange + g.lagrange_count);
+      if (inside && !taken[r]) {
+        group.push_back(static_cast<int32_t>(r));
+        taken[r] = 1;
+      }
+    }
+    if (!group.empty()) groups.push_back(std::move(group));
+  }
+  std::map<uint64_t, std::vector<int32_t>> by_age;
+  for (size_t r = 0; r < nr; ++r) {
+    if (!taken[r] && since[r] < now) by_age[since[r]].push_back(static_cast<int32_t>(r));
+  }
+  for (auto& [age, group] : by_age) groups.push_back(std::move(group));
+
+  for (std::vector<int32_t>& group : groups) {
+    // In the order of their hashes: the same rows make the same block whatever the request's order.
+    std::sort(group.begin(), group.end(),
+              [&](int32_t a, int32_t b) { return hashes[static_cast<size_t>(a)] < hashes[static_cast<size_t>(b)]; });
+    std::vector<Terms> group_terms;
+    std::vector<uint64_t> group_hashes;
+    uint64_t key = 0x6a09e667f3bcc909ULL;
+    for (int32_t r : group) {
+      group_terms.push_back(terms[static_cast<size_t>(r)]);
+      group_hashes.push_back(hashes[static_cast<size_t>(r)]);
+      key = internal::hash_mix(key, hashes[static_cast<size_t>(r)]);
+    }
+    out.block = internal::extend_block(factor, *out.block, std::move(group_terms), std::move(group_hashes), key);
+    cache.insert_block(out.block);
+    out.row_of.insert(out.row_of.end(), group.begin(), group.end());
+    out.cached += static_cast<int32_t>(group.size());
+  }
+  return out;
+}
+
 // The fast path: a cached factor with the fixed DOFs eliminated, pins for the free zero-energy
 // motions, and the rows by a Schur complement on a (cached) constraint block plus the new rows.
 Answer fast_path(const ShellModel& model, FactorCache& cache_interface, const Problem& p, const SolveOptions& options) {
@@ -172,86 +256,20 @@ Answer fast_path(const ShellModel& model, FactorCache& cache_interface, const Pr
   const size_t nr = terms.size();
   stats.constraint_rows = static_cast<int32_t>(nr);
 
-  // The cached block with the most of these rows (by the hashes of their coefficients, then
-  // compared), and the rows worth keeping: those the caller says repeat, and those that were in
-  // the previous solve on this factor (in groups by how long they have been there, oldest first).
-  std::vector<uint64_t> hashes(nr);
-  std::unordered_map<uint64_t, int32_t> first_with(nr);
-  for (size_t r = 0; r < nr; ++r) {
-    hashes[r] = internal::hash_terms(terms[r]);
-    first_with.emplace(hashes[r], static_cast<int32_t>(r));
-  }
-  std::shared_ptr<const ConstraintBlock> block = cache.find_block(factor->id(), first_with);
-  std::vector<int32_t> block_row_of;  // block row -> row of this solve
-  auto map_block = [&]() -> bool {
-    block_row_of.assign(static_cast<size_t>(block->rows()), -1);
-    for (Eigen::Index b = 0; b < block->rows(); ++b) {
-      const int32_t r = first_with.at(block->hashes[static_cast<size_t>(b)]);
-      if (terms[static_cast<size_t>(r)] != block->terms[static_cast<size_t>(b)]) return false;  // a hash collision
-      block_row_of[static_cast<size_t>(b)] = r;
-    }
-    return true;
-  };
-  if (block && !map_block()) block = nullptr;
-  if (!block) {
-    block = internal::empty_block(*factor);
-    block_row_of.clear();
-  }
-  stats.reused_rows = static_cast<int32_t>(block->rows());
-  std::vector<char> in_block(nr, 0);
-  for (int32_t r : block_row_of) in_block[static_cast<size_t>(r)] = 1;
-
-  std::vector<uint64_t> since;
-  const uint64_t now = cache.record_rows(factor->id(), hashes, since);
-  std::vector<std::vector<int32_t>> groups;  // rows to add to the block, group by group
-  {
-    std::vector<char> taken = in_block;
-    for (size_t r = 0; r < nr; ++r) {
-      if (first_with.at(hashes[r]) != static_cast<int32_t>(r)) taken[r] = 1;  // a duplicate stays new
-    }
-    for (const ConstraintGroup& g : options.repeated) {
-      std::vector<int32_t> group;
-      for (size_t r = 0; r < p.rows.size(); ++r) {
-        const Row& row = p.rows[r];
-        const bool inside =
-            (row.limit >= 0 && static_cast<size_t>(row.limit) >= g.first_limit &&
-             static_cast<size_t>(row.limit) < g.first_limit + g.limit_count) ||
-            (row.lagrange >= 0 && static_cast<size_t>(row.lagrange) >= g.first_lagrange &&
-             static_cast<size_t>(row.lagrange) < g.first_lagrange + g.lagrange_count);
-        if (inside && !taken[r]) {
-          group.push_back(static_cast<int32_t>(r));
-          taken[r] = 1;
-        }
-      }
-      if (!group.empty()) groups.push_back(std::move(group));
-    }
-    std::map<uint64_t, std::vector<int32_t>> by_age;
-    for (size_t r = 0; r < nr; ++r) {
-      if (!taken[r] && since[r] < now) by_age[since[r]].push_back(static_cast<int32_t>(r));
-    }
-    for (auto& [age, group] : by_age) groups.push_back(std::move(group));
-  }
-  for (std::vector<int32_t>& group : groups) {
-    std::sort(group.begin(), group.end(), [&](int32_t a, int32_t b) { return hashes[static_cast<size_t>(a)] < hashes[static_cast<size_t>(b)]; });
-    std::vector<Terms> group_terms;
-    std::vector<uint64_t> group_hashes;
-    uint64_t key = 0x6a09e667f3bcc909ULL;
-    for (int32_t r : group) {
-      group_terms.push_back(terms[static_cast<size_t>(r)]);
-      group_hashes.push_back(hashes[static_cast<size_t>(r)]);
-      key = internal::hash_mix(key, hashes[static_cast<size_t>(r)]);
-    }
-    block = internal::extend_block(*factor, *block, std::move(group_terms), std::move(group_hashes), key);
-    cache.insert_block(block);
-    for (int32_t r : group) {
-      block_row_of.push_back(r);
-      in_block[static_cast<size_t>(r)] = 1;
-    }
-    stats.cached_rows += static_cast<int32_t>(group.size());
-  }
+  // The block of this solve: what is cached of these rows, extended by the rows worth keeping;
+  // the other rows are new.
+  const BlockChoice chosen = choose_block(cache, *factor, p, terms, options);
+  const std::shared_ptr<const ConstraintBlock>& block = chosen.block;
+  const std::vector<int32_t>& block_row_of = chosen.row_of;
+  stats.reused_rows = chosen.reused;
+  stats.cached_rows = chosen.cached;
   std::vector<int32_t> new_rows;  // rows of this solve outside the block
-  for (size_t r = 0; r < nr; ++r) {
-    if (!in_block[r]) new_rows.push_back(static_cast<int32_t>(r));
+  {
+    std::vector<char> in_block(nr, 0);
+    for (int32_t r : block_row_of) in_block[static_cast<size_t>(r)] = 1;
+    for (size_t r = 0; r < nr; ++r) {
+      if (!in_block[r]) new_rows.push_back(static_cast<int32_t>(r));
+    }
   }
 
   // Right-hand side of the factored DOFs: loads minus the pull of the factor's prescribed DOFs
