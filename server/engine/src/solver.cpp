@@ -65,9 +65,17 @@ struct Verdict {
   bool finite = true;
 };
 
-// `ku` = K u. `lambda`: the multiplier of every row of p.
+// The size of an object for the check: its bounding diagonal or its distance from the origin,
+// whichever is larger (coordinates carry round-off of their magnitude).
+double geometry_size(const ShellModel& model) {
+  Vec3 lo, hi;
+  model.mesh().bounding_box(lo, hi);
+  return std::max({(hi - lo).norm(), lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff()});
+}
+
+// `ku` = K u. `lambda`: the multiplier of every row of p. `size`: geometry_size(model).
 Verdict judge(const ShellModel& model, const Problem& p, const Eigen::VectorXd& u, const Eigen::VectorXd& ku,
-              const Eigen::VectorXd& lambda) {
+              const Eigen::VectorXd& lambda, double size) {
   Verdict v;
   if (!u.allFinite() || !lambda.allFinite()) {
     v.finite = false;
@@ -91,9 +99,9 @@ Verdict judge(const ShellModel& model, const Problem& p, const Eigen::VectorXd& 
     const double residual = std::abs(p.load[i] - ku[i] - reaction[i]);
     double allowed = kEquilibrium * force_scale;
     if (residual > kConverged * allowed) {  // add the round-off of this row (K is symmetric: column i)
-      double size = std::abs(p.load[i]) + reaction_size[i];
-      for (Eigen::SparseMatrix<double>::InnerIterator it(k, i); it; ++it) size += std::abs(it.value() * u[it.row()]);
-      allowed += kRoundOff * size;
+      double terms = std::abs(p.load[i]) + reaction_size[i];
+      for (Eigen::SparseMatrix<double>::InnerIterator it(k, i); it; ++it) terms += std::abs(it.value() * u[it.row()]);
+      allowed += kRoundOff * terms;
     }
     if (residual > v.worst * allowed) {
       v = Verdict{residual / allowed, false, 0, static_cast<int32_t>(i), residual, force_scale, true};
@@ -102,9 +110,6 @@ Verdict judge(const ShellModel& model, const Problem& p, const Eigen::VectorXd& 
   double displacement_scale = u.cwiseAbs().maxCoeff();
   for (int32_t dof : p.fixed) displacement_scale = std::max(displacement_scale, std::abs(p.fixed_value[dof]));
   for (const Row& row : p.rows) displacement_scale = std::max(displacement_scale, std::abs(row.rhs) / row.scale);
-  Vec3 lo, hi;
-  model.mesh().bounding_box(lo, hi);
-  const double size = std::max({(hi - lo).norm(), lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff()});
   for (size_t r = 0; r < p.rows.size(); ++r) {
     const Row& row = p.rows[r];
     double lhs = 0.0, terms = std::abs(row.rhs);
@@ -215,7 +220,8 @@ BlockChoice choose_block(FactorCache::Impl& cache, const Factorization& factor, 
 
 // The fast path: a cached factor with the fixed DOFs eliminated, pins for the free zero-energy
 // motions, and the rows by a Schur complement on a (cached) constraint block plus the new rows.
-Answer fast_path(const ShellModel& model, FactorCache& cache_interface, const Problem& p, const SolveOptions& options) {
+Answer fast_path(const ShellModel& model, FactorCache& cache_interface, const Problem& p, const SolveOptions& options,
+                 double size) {
   FactorCache::Impl& cache = cache_interface.impl();
   Answer answer;
   SolveStats& stats = answer.stats;
@@ -338,7 +344,7 @@ Answer fast_path(const ShellModel& model, FactorCache& cache_interface, const Pr
   // Check, and refine against the full system's residual while it is not at round-off (each
   // step costs one more pair of sweeps).
   Eigen::VectorXd ku = k * u;
-  answer.verdict = judge(model, p, u, ku, multipliers());
+  answer.verdict = judge(model, p, u, ku, multipliers(), size);
   for (int step = 0; step < 3 && answer.verdict.finite && answer.verdict.worst > kConverged; ++step) {
     Eigen::VectorXd force = p.load - ku;
     for (size_t i = 0; i < row_of.size(); ++i) {
@@ -359,12 +365,12 @@ Answer fast_path(const ShellModel& model, FactorCache& cache_interface, const Pr
     y += dy;
     scatter();
     ku = k * u;
-    answer.verdict = judge(model, p, u, ku, multipliers());
+    answer.verdict = judge(model, p, u, ku, multipliers(), size);
     ++stats.refinement_steps;
   }
   if (const internal::FastPathCorruption corrupt = internal::g_corrupt_fast_path.load()) {
     corrupt(u);
-    answer.verdict = judge(model, p, u, k * u, multipliers());
+    answer.verdict = judge(model, p, u, k * u, multipliers(), size);
   }
   answer.lambda = multipliers();
   answer.u = std::move(u);
@@ -373,7 +379,7 @@ Answer fast_path(const ShellModel& model, FactorCache& cache_interface, const Pr
 
 // The robust path: sparse LU of the full KKT system (independent rows only; the dependent ones
 // are checked afterwards).
-Answer robust_path(const ShellModel& model, const Problem& p) {
+Answer robust_path(const ShellModel& model, const Problem& p, double size) {
   Answer answer;
   const int32_t ndof = model.num_dofs();
   std::vector<int32_t> index(static_cast<size_t>(ndof), -1);
@@ -450,7 +456,7 @@ Answer robust_path(const ShellModel& model, const Problem& p) {
   for (Eigen::Index c = 0; c < nc; ++c) {
     answer.lambda[static_cast<Eigen::Index>(independent[static_cast<size_t>(c)])] = weight[static_cast<size_t>(c)] * x[nf + c];
   }
-  answer.verdict = judge(model, p, answer.u, k * answer.u, answer.lambda);
+  answer.verdict = judge(model, p, answer.u, k * answer.u, answer.lambda, size);
   answer.stats.path = SolvePath::kFallback;
   answer.stats.constraint_rows = static_cast<int32_t>(nc);
   return answer;
@@ -469,8 +475,8 @@ std::string describe(const ShellModel& model, const Problem& p, const Verdict& v
 }
 
 // The robust path's answer, or the reason there is none.
-Answer checked_robust_path(const ShellModel& model, const Problem& p, const std::string& fast_failure) {
-  Answer answer = robust_path(model, p);
+Answer checked_robust_path(const ShellModel& model, const Problem& p, const std::string& fast_failure, double size) {
+  Answer answer = robust_path(model, p, size);
   const Verdict& v = answer.verdict;
   if (v.worst <= 1.0) return answer;
   if (v.finite && v.constraint && answer.dependent[v.row]) {
@@ -505,6 +511,7 @@ Solver::Solver(std::shared_ptr<const ShellModel> model, std::shared_ptr<FactorCa
     : model_(std::move(model)), cache_(std::move(cache)) {
   if (!model_) fail(ErrorCode::kInvalidArgument, "Solver needs a model");
   if (!cache_) cache_ = std::make_shared<FactorCache>();
+  size_ = geometry_size(*model_);
 }
 
 Result<Solution> Solver::solve(const DeformationRequest& request, const SolveOptions& options) const {
@@ -514,7 +521,7 @@ Result<Solution> Solver::solve(const DeformationRequest& request, const SolveOpt
     internal::check_determined(*model_, p);
     std::string fast_failure;
     try {
-      Answer fast = fast_path(*model_, *cache_, p, options);
+      Answer fast = fast_path(*model_, *cache_, p, options, size_);
       if (fast.verdict.worst <= 1.0) return to_solution(std::move(fast), start);
       fast_failure = describe(*model_, p, fast.verdict);
     } catch (const internal::FactorizationFailed& e) {
@@ -522,7 +529,7 @@ Result<Solution> Solver::solve(const DeformationRequest& request, const SolveOpt
       // not catch: the full KKT system tells whether the constraints hold it.
       (void)e;
     }
-    Answer robust = checked_robust_path(*model_, p, fast_failure);
+    Answer robust = checked_robust_path(*model_, p, fast_failure, size_);
     robust.stats.fast_path_rejected = !fast_failure.empty();
     return to_solution(std::move(robust), start);
   });
@@ -533,7 +540,7 @@ Result<Solution> Solver::solve_with_fallback(const DeformationRequest& request) 
     const auto start = Clock::now();
     Problem p = internal::build_problem(*model_, request);
     internal::check_determined(*model_, p);
-    return to_solution(checked_robust_path(*model_, p, {}), start);
+    return to_solution(checked_robust_path(*model_, p, {}, size_), start);
   });
 }
 

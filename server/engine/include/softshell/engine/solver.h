@@ -107,6 +107,7 @@ class Solver {
  private:
   std::shared_ptr<const ShellModel> model_;
   std::shared_ptr<FactorCache> cache_;
+  double size_ = 0.0;  // of the geometry, for the final check
 };
 
 }  // namespace softshell::engine
