@@ -25,18 +25,18 @@ uint64_t mix(uint64_t h, uint64_t x) {
   return h ^ x;
 }
 
-// The columns C^T of rows on the factored DOFs (dense: factor rows x rows) and their
-// coefficients on the pins (pins x rows).
-void row_columns(const Factorization& factor, const std::vector<Terms>& rows, Eigen::MatrixXd& on_factored,
+// The columns C^T of rows on the factored DOFs (dense: factor rows x rows; skipped if null) and
+// their coefficients on the pins (pins x rows).
+void row_columns(const Factorization& factor, const std::vector<Terms>& rows, Eigen::MatrixXd* on_factored,
                  Eigen::MatrixXd& on_pins) {
   const auto na = static_cast<Eigen::Index>(factor.factored().size());
   const auto nq = static_cast<Eigen::Index>(factor.pinned().size());
-  on_factored.setZero(na, static_cast<Eigen::Index>(rows.size()));
+  if (on_factored) on_factored->setZero(na, static_cast<Eigen::Index>(rows.size()));
   on_pins.setZero(nq, static_cast<Eigen::Index>(rows.size()));
   for (size_t r = 0; r < rows.size(); ++r) {
     for (const auto& [dof, coef] : rows[r]) {
       if (const int32_t a = factor.position(dof); a >= 0) {
-        on_factored(a, static_cast<Eigen::Index>(r)) += coef;
+        if (on_factored) (*on_factored)(a, static_cast<Eigen::Index>(r)) += coef;
       } else if (const int32_t q = factor.pin_position(dof); q >= 0) {
         on_pins(q, static_cast<Eigen::Index>(r)) += coef;
       } else {
@@ -130,7 +130,7 @@ std::shared_ptr<const ConstraintBlock> extend_block(const Factorization& factor,
   const auto nq = static_cast<Eigen::Index>(factor.pinned().size());
   const Eigen::Index np = parent.rows(), ne = static_cast<Eigen::Index>(rows.size());
   Eigen::MatrixXd columns, on_pins;
-  row_columns(factor, rows, columns, on_pins);
+  row_columns(factor, rows, &columns, on_pins);
   const Eigen::MatrixXd y = factor.forward(columns);
   auto swept = std::make_shared<const SweptColumns>(SweptColumns::compress(y));
   std::vector<char> reached(static_cast<size_t>(y.rows()), 0);
@@ -235,8 +235,8 @@ SchurSystem::SchurSystem(const Factorization& factor, std::shared_ptr<const Cons
   const auto nk = static_cast<Eigen::Index>(b.kept.size());
   const Eigen::Index nc = nq_ + static_cast<Eigen::Index>(b.deferred.size());
   // S(., G): pins M_QG - Y_Q^T Y_G, block rows -Y_B^T Y_G, new rows -Y_G^T Y_G.
-  Eigen::MatrixXd unused, on_pins;
-  row_columns(factor, new_rows, unused, on_pins);
+  Eigen::MatrixXd on_pins;
+  row_columns(factor, new_rows, nullptr, on_pins);
   Eigen::MatrixXd s_qg = on_pins;
   s_qg.noalias() -= factor.pin_columns().transpose() * y_new_;
   // The new rows are local: only the factor rows their sweep reached take part.
