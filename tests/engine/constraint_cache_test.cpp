@@ -42,8 +42,13 @@ struct Floor {
   int floor_rows() const { return static_cast<int>(3 * floor.limit_constraints.size()); }
 };
 
+const Floor& floor_setup() {  // built once for all tests (immutable)
+  static const Floor f;
+  return f;
+}
+
 TEST(ConstraintCache, RepeatedRowsAreCachedAndGiveTheUncachedAnswer) {
-  Floor f;
+  const Floor& f = floor_setup();
   ASSERT_TRUE(f.floor.fixes_rigid_motion);
   ASSERT_GE(f.floor_rows(), 12);
   auto cache = std::make_shared<FactorCache>();
@@ -90,7 +95,7 @@ TEST(ConstraintCache, RepeatedRowsAreCachedAndGiveTheUncachedAnswer) {
 }
 
 TEST(ConstraintCache, GroupsNamedByTheCallerAreCachedAtTheirFirstUse) {
-  Floor f;
+  const Floor& f = floor_setup();
   auto cache = std::make_shared<FactorCache>();
   Solver solver(f.model, cache);
   SolveOptions options;
@@ -109,7 +114,7 @@ TEST(ConstraintCache, GroupsNamedByTheCallerAreCachedAtTheirFirstUse) {
 // Many solves at once on one cache, each thread its own grab on the same floor: the blocks are
 // shared and every answer is the serial one.
 TEST(ConstraintCache, ConcurrentSolvesShareTheBlocks) {
-  Floor f;
+  const Floor& f = floor_setup();
   auto cache = std::make_shared<FactorCache>();
   Solver solver(f.model, cache);
   ASSERT_TRUE(solver.solve(f.request(1, Vec3(0.0, 0.01, 0.0))).ok());
@@ -139,7 +144,7 @@ TEST(ConstraintCache, ConcurrentSolvesShareTheBlocks) {
 }
 
 TEST(ConstraintCache, BlocksCountAgainstTheBudget) {
-  Floor f;
+  const Floor& f = floor_setup();
   const DeformationRequest first = f.request(10, Vec3(0.0, 0.02, 0.0)), second = f.request(30, Vec3(0.0, 0.02, 0.0));
   // Plenty of room: factor and floor block are kept, and the bytes add up.
   auto roomy = std::make_shared<FactorCache>();
