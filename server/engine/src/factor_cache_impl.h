@@ -73,4 +73,13 @@ struct FactorCache::Impl {
   uint64_t clock = 0, hits = 0, misses = 0, evictions = 0, block_hits = 0;
 };
 
+namespace internal {
+
+// How the engine's solvers reach the cache's entries; FactorCache's public interface is only
+// budgets and counters.
+struct FactorCacheAccess {
+  static FactorCache::Impl& impl(FactorCache& cache) { return *cache.impl_; }
+};
+
+}  // namespace internal
 }  // namespace softshell::engine

@@ -45,22 +45,28 @@ cholmod_common* thread_common() {
 // A threaded OpenBLAS is also told to use one thread per call (unless OPENBLAS_NUM_THREADS says
 // otherwise): the service already runs solves in parallel, one per core, and BLAS threads on top
 // would only oversubscribe the cores (measured: 2 concurrent clients got less throughput than 1).
-bool blas_is_thread_unsafe() {
-  static const bool unsafe = [] {
-    using Query = int (*)();
-    auto query = reinterpret_cast<Query>(dlsym(RTLD_DEFAULT, "openblas_get_parallel"));
-    if (query != nullptr && query() != 0 && std::getenv("OPENBLAS_NUM_THREADS") == nullptr) {
-      using SetThreads = void (*)(int);
-      if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(1);
-    }
-    return query != nullptr && query() == 0;  // 0 = sequential build
-  }();
-  return unsafe;
+//
+// The probe runs once, when the engine library is loaded (BLAS is loaded before it, as CHOLMOD's
+// dependency), so no kernel ever calls dlsym or changes BLAS settings.
+struct BlasPolicy {
+  bool thread_unsafe = false;  // calls must take turns
+};
+
+BlasPolicy probe_blas() {
+  using Query = int (*)();
+  auto query = reinterpret_cast<Query>(dlsym(RTLD_DEFAULT, "openblas_get_parallel"));
+  if (query != nullptr && query() != 0 && std::getenv("OPENBLAS_NUM_THREADS") == nullptr) {
+    using SetThreads = void (*)(int);
+    if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(1);
+  }
+  return BlasPolicy{query != nullptr && query() == 0};  // 0 = sequential build
 }
 
+const BlasPolicy g_blas = probe_blas();
+std::mutex g_blas_mutex;
+
 std::unique_lock<std::mutex> blas_turn() {
-  static std::mutex mutex;
-  return blas_is_thread_unsafe() ? std::unique_lock<std::mutex>(mutex) : std::unique_lock<std::mutex>();
+  return g_blas.thread_unsafe ? std::unique_lock<std::mutex>(g_blas_mutex) : std::unique_lock<std::mutex>();
 }
 
 std::atomic<uint64_t> g_next_factor_id{1};

@@ -222,7 +222,7 @@ BlockChoice choose_block(FactorCache::Impl& cache, const Factorization& factor, 
 // motions, and the rows by a Schur complement on a (cached) constraint block plus the new rows.
 Answer fast_path(const ShellModel& model, FactorCache& cache_interface, const Problem& p, const SolveOptions& options,
                  double size) {
-  FactorCache::Impl& cache = cache_interface.impl();
+  FactorCache::Impl& cache = internal::FactorCacheAccess::impl(cache_interface);
   Answer answer;
   SolveStats& stats = answer.stats;
   stats.path = SolvePath::kCachedFactor;

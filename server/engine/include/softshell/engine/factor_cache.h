@@ -9,6 +9,9 @@
 #include <memory>
 
 namespace softshell::engine {
+namespace internal {
+struct FactorCacheAccess;
+}  // namespace internal
 
 /// Counters of a factor cache.
 struct FactorCacheStats {
@@ -45,10 +48,10 @@ class FactorCache {
   void forget_model(uint64_t model_id);
   void clear();
 
-  struct Impl;
-  Impl& impl() { return *impl_; }
+  struct Impl;  // server/engine/src/factor_cache_impl.h
 
  private:
+  friend struct internal::FactorCacheAccess;  // the solvers' way in (engine-private)
   std::unique_ptr<Impl> impl_;
 };
 
