@@ -38,10 +38,12 @@ IrregularCorners::IrregularCorners(const ControlMesh& mesh) : mesh_(mesh) {
   const auto n = static_cast<size_t>(mesh.num_vertices());
   std::vector<int32_t> faces_around(n, 0);
   std::map<std::pair<int32_t, int32_t>, int> edge_faces;
+  next_to_non_quad_.assign(n, 0);
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     auto fv = mesh.face(f);
     for (size_t i = 0; i < fv.size(); ++i) {
       ++faces_around[static_cast<size_t>(fv[i])];
+      if (fv.size() != 4) next_to_non_quad_[static_cast<size_t>(fv[i])] = 1;
       const int32_t a = fv[i], b = fv[(i + 1) % fv.size()];
       ++edge_faces[{std::min(a, b), std::max(a, b)}];
     }
@@ -70,7 +72,9 @@ uint8_t IrregularCorners::corners(int32_t face, int32_t subface) const {
   if (fv.size() == 4) {
     uint8_t mask = 0;
     for (int c = 0; c < 4; ++c) {
-      if (irregular_vertex_[static_cast<size_t>(fv[static_cast<size_t>(c)])]) mask |= static_cast<uint8_t>(1u << c);
+      const auto v = static_cast<size_t>(fv[static_cast<size_t>(c)]);
+      if (irregular_vertex_[v]) mask |= static_cast<uint8_t>(1u << c);
+      if (next_to_non_quad_[v]) mask |= kSplitOnce;
     }
     return mask;
   }
@@ -108,7 +112,12 @@ std::array<Cell, 4> split(const Cell& cell) {
 
 void face_cells(int levels, uint8_t corner_mask, std::vector<Cell>& out) {
   out.clear();
-  refine(Cell{0.0, 0.0, 1.0}, corner_mask ? levels : 0, corner_mask, out);
+  const auto corners = static_cast<uint8_t>(corner_mask & 0xfu);
+  if ((corner_mask & kSplitOnce) && !(corners && levels > 0)) {
+    for (const Cell& quarter : split(Cell{0.0, 0.0, 1.0})) out.push_back(quarter);
+    return;
+  }
+  refine(Cell{0.0, 0.0, 1.0}, corners ? levels : 0, corners, out);
 }
 
 void cell_points(const std::vector<Cell>& cells, const std::vector<double>& gauss_points,

@@ -3,8 +3,10 @@
 //
 // Regular faces are bicubic patches: one Gauss rule over the face. Faces next to an extraordinary
 // vertex (EV) or a sharp feature are piecewise polynomial on dyadic sub-squares that shrink toward
-// that corner (Bfr's patch tree), so the domain is split dyadically toward every irregular corner
-// and each cell gets its own Gauss rule. Cells whose parametrization is strongly non-uniform are
+// that corner (the rings of the exact evaluation), so the domain is split dyadically toward every
+// irregular corner and each cell gets its own Gauss rule. Quads whose corners are regular but
+// touch a non-quad face are 2 x 2 bicubic pieces (the children of one subdivision step): they are
+// split once. Cells whose parametrization is strongly non-uniform are
 // split further by the integration itself (shell_model.cpp), which sees the geometry.
 
 #include <array>
@@ -21,7 +23,10 @@ namespace softshell::engine::internal {
 void gauss_legendre_01(int n, std::vector<double>& points, std::vector<double>& weights);
 
 /// Which corners of each (face, sub-face) domain need refinement: bit c set for corner c in the
-/// protocol's order (0 = (0,0), 1 = (1,0), 2 = (1,1), 3 = (0,1)).
+/// protocol's order (0 = (0,0), 1 = (1,0), 2 = (1,1), 3 = (0,1)); kSplitOnce set for a quad that
+/// is 2 x 2 polynomial pieces (a corner touches a non-quad face).
+inline constexpr uint8_t kSplitOnce = 1u << 4;
+
 class IrregularCorners {
  public:
   explicit IrregularCorners(const ControlMesh& mesh);
@@ -30,6 +35,7 @@ class IrregularCorners {
  private:
   const ControlMesh& mesh_;
   std::vector<char> irregular_vertex_;  // per control point
+  std::vector<char> next_to_non_quad_;  // per control point: one of its faces is not a quad
 };
 
 /// A square [u0, u0 + size] x [v0, v0 + size] of a (sub-)face's parameter domain.
@@ -41,7 +47,7 @@ struct Cell {
 std::array<Cell, 4> split(const Cell& cell);
 
 /// The cells of one (sub-)face: the unit square split dyadically `levels` times toward each
-/// corner in `corner_mask`. Their areas sum to 1.
+/// corner in `corner_mask`, and at least once if it has kSplitOnce. Their areas sum to 1.
 void face_cells(int levels, uint8_t corner_mask, std::vector<Cell>& out);
 
 /// The tensor Gauss rule (points and weights on [0, 1]) on each cell, cell after cell; the
