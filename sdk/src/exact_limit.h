@@ -24,6 +24,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include <Eigen/Core>
@@ -86,7 +87,24 @@ class EvConfig {
   const Eigen::RowVectorXd& limit_mask() const { return limit_; }
   const RowMatrix& subdivision_matrix() const { return subdivision_; }
 
+  /// A quadrature rule for the square [0, h]^2 at the corner, which holds infinitely many
+  /// polynomial rings: the g x g Gauss rule with its weights multiplied by the returned factors
+  /// (order i + g j, point i along s, j along t). The factors make the rule exact for the
+  /// Jacobian of the characteristic map (the map by the two dominant eigenvectors of A), the
+  /// leading term near the corner of the area element, of the surface gradient of every basis
+  /// function, and so of every integrand of the shell. By self-similarity the same factors serve
+  /// every h = 2^-k. Computed once per g; thread-safe.
+  const std::vector<double>& corner_rule(int g) const;
+
+  /// The exact integral over [0, 2^-level]^2 of N_i (x_s x x_t) ds dt for every neighbourhood
+  /// point i, for neighbourhood points x (K x 3): K x 3. (A trilinear form, summed over the
+  /// infinitely many rings in closed form.) Thread-safe.
+  void normal_integral(int level, const RowMatrix& x, RowMatrix& out) const;
+
  private:
+  std::vector<double> compute_corner_rule(int g) const;
+  /// U[a][b][c] = integral over [0, 1]^2 of phi_a phi_b,s phi_c,t (computed once).
+  const std::vector<double>& normal_tensor() const;
   static constexpr int kTableLevels = 16;
   int size_ = 0;
   RowMatrix subdivision_;                         // A, K x K
@@ -94,6 +112,12 @@ class EvConfig {
   RowMatrix tangents_;                            // 2 x K at the corner
   std::vector<std::array<RowMatrix, 3>> table_;   // [n-1][k-1] = P_k B^(n-1), 16 x K, B = A - 1 l
   std::vector<RowMatrix> powers_;                 // B^(2^j)
+  Eigen::MatrixXd chart_;                         // K x 2: the dominant invariant pair of B
+  double chart_ratio_ = 0.0;                      // det of A on it: the rings' area ratio
+  mutable std::mutex rules_mutex_;
+  mutable std::map<int, std::vector<double>> rules_;  // corner rules by g
+  mutable std::once_flag normal_once_;
+  mutable std::vector<double> normal_tensor_;
 };
 
 /// The exact evaluation of every face with one numbered 1-ring topology.
@@ -111,6 +135,13 @@ class FaceProgram {
   /// `scratch` is reused storage.
   void evaluate(int subface, double u, double v, double* out, std::vector<double>& scratch) const;
 
+  /// EvConfig::corner_rule for the square cell of side `size` at corner `corner` of sub-face
+  /// `subface`, in the cell's point order (i + g j, point i along u, j along v). False if the
+  /// corner is regular or the cell is larger than its extraordinary piece.
+  bool corner_rule(int subface, int corner, double size, int g, std::vector<double>& out) const;
+  /// EvConfig::normal_integral for that cell, for local points x (size() x 3): size() x 3.
+  bool corner_normal_integral(int subface, int corner, double size, const RowMatrix& x, RowMatrix& out) const;
+
  private:
   struct Piece {
     int subface = 0;
@@ -120,6 +151,9 @@ class FaceProgram {
     const EvConfig* config = nullptr;               // an extraordinary piece, or a regular patch
     RowMatrix matrix;                               // 16 x size() (regular) or K x size() (EvConfig)
   };
+  /// The extraordinary piece at that corner, if a dyadic square of that size there lies in it.
+  const Piece* corner_piece(int subface, int corner, double size) const;
+
   int size_ = 0;
   std::vector<Piece> pieces_;
   friend struct ProgramBuilder;

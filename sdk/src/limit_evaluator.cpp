@@ -193,6 +193,31 @@ bool LimitEvaluator::is_regular(int32_t face) const {
   return !fs.program && fs.surface.IsRegular();
 }
 
+bool LimitEvaluator::ev_corner_weights(int32_t face, int32_t subface, int corner, double cell_size, int gauss_points,
+                                       std::vector<double>& weight_factors) const {
+  if (!has_limit_surface(face) || subface < 0 || subface >= num_subfaces(face) || corner < 0 || corner > 3 ||
+      !(cell_size > 0.0 && cell_size <= 1.0) || gauss_points < 1 || gauss_points > 16) {
+    return false;
+  }
+  const internal::FaceSurface& fs = impl_->faces[static_cast<size_t>(face)];
+  return fs.program && fs.program->corner_rule(subface, corner, cell_size, gauss_points, weight_factors);
+}
+
+bool LimitEvaluator::ev_corner_normal_weights(int32_t face, int32_t subface, int corner, double cell_size,
+                                              const std::vector<Vec3>& positions, Eigen::Matrix3Xd& out) const {
+  if (!has_limit_surface(face) || subface < 0 || subface >= num_subfaces(face) || corner < 0 || corner > 3 ||
+      !(cell_size > 0.0 && cell_size <= 1.0) || positions.size() != static_cast<size_t>(num_control_points())) {
+    return false;
+  }
+  const internal::FaceSurface& fs = impl_->faces[static_cast<size_t>(face)];
+  if (!fs.program) return false;
+  internal::RowMatrix x(static_cast<Eigen::Index>(fs.support.size()), 3), local;
+  for (size_t k = 0; k < fs.support.size(); ++k) x.row(static_cast<Eigen::Index>(k)) = positions[static_cast<size_t>(fs.support[k])].transpose();
+  if (!fs.program->corner_normal_integral(subface, corner, cell_size, x, local)) return false;
+  out = local.transpose();
+  return true;
+}
+
 std::vector<int32_t> LimitEvaluator::support(int32_t face) const {
   if (!has_limit_surface(face)) {
     fail(ErrorCode::kInvalidArgument, "face " + std::to_string(face) + " has no limit surface");

@@ -13,6 +13,8 @@
 #include <cstdint>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "softshell/control_mesh.h"
 #include "softshell/engine/shell_model.h"
 #include "softshell/limit_evaluator.h"
@@ -41,19 +43,32 @@ class IrregularCorners {
 /// A square [u0, u0 + size] x [v0, v0 + size] of a (sub-)face's parameter domain.
 struct Cell {
   double u0 = 0.0, v0 = 0.0, size = 1.0;
+  /// A cell at an extraordinary corner (which holds infinitely many polynomial rings): the
+  /// corner (0..3) and the factors of its Gauss weights (LimitEvaluator::ev_corner_weights).
+  int ev_corner = -1;
+  std::vector<double> weight_factors;
 };
 
-/// Its four quarters.
+/// Its four quarters (the one at an extraordinary corner keeps the corner's weight factors).
 std::array<Cell, 4> split(const Cell& cell);
 
 /// The cells of one (sub-)face: the unit square split dyadically `levels` times toward each
-/// corner in `corner_mask`, and at least once if it has kSplitOnce. Their areas sum to 1.
-void face_cells(int levels, uint8_t corner_mask, std::vector<Cell>& out);
+/// corner in `corner_mask`, and at least once if it has kSplitOnce. Their areas sum to 1. The
+/// cells at an extraordinary corner get the evaluator's weight factors for `gauss_points`.
+void face_cells(const LimitEvaluator& evaluator, int32_t face, int32_t subface, int gauss_points, int levels,
+                uint8_t corner_mask, std::vector<Cell>& out);
 
 /// The tensor Gauss rule (points and weights on [0, 1]) on each cell, cell after cell; the
-/// weights include the cell's area.
+/// weights include the cell's area (and its weight factors).
 void cell_points(const std::vector<Cell>& cells, const std::vector<double>& gauss_points,
                  const std::vector<double>& gauss_weights, std::vector<std::array<double, 2>>& out_uv,
                  std::vector<double>& out_weight);
+
+/// The pressure load (integral of N_A n dA, 3 x indices.size(), columns for the control points
+/// `indices`) of the cells at extraordinary corners, exactly (LimitEvaluator::
+/// ev_corner_normal_weights: no point rule integrates it there); `exact[c]` set for those cells.
+Eigen::Matrix3Xd exact_corner_normal_weights(const LimitEvaluator& evaluator, int32_t face, int32_t subface,
+                                             const std::vector<Cell>& cells, const std::vector<int32_t>& indices,
+                                             std::vector<char>& exact);
 
 }  // namespace softshell::engine::internal
