@@ -490,60 +490,63 @@ std::unique_ptr<EvConfig> EvConfig::build(const std::vector<int32_t>& signature)
   return out;
 }
 
-void EvConfig::evaluate(double s, double t, double* out) const {
-  const int k = size_;
-  std::fill(out, out + 6 * k, 0.0);
+EvConfig::Location EvConfig::locate(double s, double t) {
+  Location at;
   const double m = std::max(s, t);
   int e = 0;
   (void)std::frexp(m, &e);  // m in [2^(e-1), 2^e)
-  if (!(m > 0.0) || e < -998) {
-    for (int j = 0; j < k; ++j) {
-      out[j] = limit_[j];
-      out[k + j] = tangents_(0, j);
-      out[2 * k + j] = tangents_(1, j);
-    }
+  if (!(m > 0.0) || e < -998) return at;  // the corner itself
+  at.ring = std::max(1, 1 - e);  // the ring [2^-n, 2^-(n-1)] of sub-patches at level n
+  const double scale = std::ldexp(1.0, at.ring);
+  const double ss = std::min(2.0, s * scale), tt = std::min(2.0, t * scale);
+  if (ss >= 1.0) {  // sub-patch 1 (along s), 2 (diagonal), 3 (along t)
+    at.patch = tt >= 1.0 ? 2 : 1;
+    at.a = ss - 1.0;
+    at.b = tt >= 1.0 ? tt - 1.0 : tt;
+  } else {
+    at.patch = 3;
+    at.a = ss;
+    at.b = tt - 1.0;
+  }
+  at.a = std::clamp(at.a, 0.0, 1.0);
+  at.b = std::clamp(at.b, 0.0, 1.0);
+  return at;
+}
+
+const RowMatrix& EvConfig::ring_points(int ring, int patch, RowMatrix& deep) const {
+  if (ring <= kTableLevels) return table_[static_cast<size_t>(ring - 1)][static_cast<size_t>(patch - 1)];
+  deep = table_[kTableLevels - 1][static_cast<size_t>(patch - 1)];
+  for (int bits = ring - kTableLevels, j = 0; bits; bits >>= 1, ++j) {
+    if (bits & 1) deep = (deep * powers_[static_cast<size_t>(j)]).eval();
+  }
+  return deep;
+}
+
+void EvConfig::basis_rows(const Location& at, double* out) {
+  double basis[6][16];
+  bspline_basis(at.a, at.b, basis);
+  const double scale = std::ldexp(1.0, at.ring);
+  const double order_scale[6] = {1.0, scale, scale, scale * scale, scale * scale, scale * scale};
+  for (int r = 0; r < 6; ++r) {
+    for (int i = 0; i < 16; ++i) out[16 * r + i] = basis[r][i] * order_scale[r];
+  }
+}
+
+void EvConfig::evaluate(double s, double t, double* out) const {
+  const int k = size_;
+  Eigen::Map<Eigen::Matrix<double, 6, Eigen::Dynamic, Eigen::RowMajor>> result(out, 6, k);
+  const Location at = locate(s, t);
+  if (at.ring == 0) {
+    result.setZero();
+    result.row(0) = limit_;
+    result.middleRows(1, 2) = tangents_;
     return;
   }
-  const int n = std::max(1, 1 - e);  // the ring [2^-n, 2^-(n-1)] of sub-patches at level n
-  const double scale = std::ldexp(1.0, n);
-  const double ss = std::min(2.0, s * scale), tt = std::min(2.0, t * scale);
-  int c;  // sub-patch 1 (s >= t side), 2 (diagonal), 3
-  double a, b;
-  if (ss >= 1.0) {
-    c = tt >= 1.0 ? 2 : 1;
-    a = ss - 1.0;
-    b = tt >= 1.0 ? tt - 1.0 : tt;
-  } else {
-    c = 3;
-    a = ss;
-    b = tt - 1.0;
-  }
-  a = std::clamp(a, 0.0, 1.0);
-  b = std::clamp(b, 0.0, 1.0);
-  double basis[6][16];
-  bspline_basis(a, b, basis);
-  const double order_scale[6] = {1.0, scale, scale, scale * scale, scale * scale, scale * scale};
+  Eigen::Matrix<double, 6, 16, Eigen::RowMajor> rows;
+  basis_rows(at, rows.data());
   RowMatrix deep;
-  const RowMatrix* d;
-  if (n <= kTableLevels) {
-    d = &table_[static_cast<size_t>(n - 1)][static_cast<size_t>(c - 1)];
-  } else {
-    deep = table_[kTableLevels - 1][static_cast<size_t>(c - 1)];
-    for (int bits = n - kTableLevels, j = 0; bits; bits >>= 1, ++j) {
-      if (bits & 1) deep = (deep * powers_[static_cast<size_t>(std::min(j, 10))]).eval();
-    }
-    d = &deep;
-  }
-  for (int r = 0; r < 6; ++r) {
-    double* row = out + r * k;
-    for (int i = 0; i < 16; ++i) {
-      const double w = basis[r][i] * order_scale[r];
-      if (w == 0.0) continue;
-      const double* src = d->row(i).data();
-      for (int j = 0; j < k; ++j) row[j] += w * src[j];
-    }
-  }
-  for (int j = 0; j < k; ++j) out[j] += limit_[j];
+  result.noalias() = rows * ring_points(at.ring, at.patch, deep);
+  result.row(0) += limit_;
 }
 
 const std::vector<double>& EvConfig::corner_rule(int g) const {
@@ -852,61 +855,107 @@ std::unique_ptr<FaceProgram> FaceProgram::build(const std::vector<int32_t>& sign
        "cannot set up the exact limit surface of a face with this neighbourhood (is the mesh a manifold?)");
 }
 
-void FaceProgram::evaluate(int subface, double u, double v, double* out, std::vector<double>& scratch) const {
-  const Piece* piece = nullptr;
+const FaceProgram::Piece& FaceProgram::piece_at(int subface, double u, double v) const {
   for (const Piece& p : pieces_) {
-    if (p.subface == subface && u >= p.umin && u <= p.umax && v >= p.vmin && v <= p.vmax) {
-      piece = &p;
-      break;
+    if (p.subface == subface && u >= p.umin && u <= p.umax && v >= p.vmin && v <= p.vmax) return p;
+  }
+  fail(ErrorCode::kInternal, "no piece of the face contains the point");
+}
+
+void FaceProgram::to_subface(const Piece& piece, Eigen::Ref<RowMatrix> rows) {
+  const double su = piece.su, sv = piece.sv, tu = piece.tu, tv = piece.tv;
+  if (su == 1.0 && sv == 0.0 && tu == 0.0 && tv == 1.0) return;
+  for (Eigen::Index i = 0; i + 5 < rows.rows(); i += 6) {
+    for (Eigen::Index j = 0; j < rows.cols(); ++j) {
+      const double fs = rows(i + 1, j), ft = rows(i + 2, j);
+      const double fss = rows(i + 3, j), fst = rows(i + 4, j), ftt = rows(i + 5, j);
+      rows(i + 1, j) = fs * su + ft * tu;
+      rows(i + 2, j) = fs * sv + ft * tv;
+      rows(i + 3, j) = fss * su * su + 2.0 * fst * su * tu + ftt * tu * tu;
+      rows(i + 4, j) = fss * su * sv + fst * (su * tv + sv * tu) + ftt * tu * tv;
+      rows(i + 5, j) = fss * sv * sv + 2.0 * fst * sv * tv + ftt * tv * tv;
     }
   }
-  if (!piece) fail(ErrorCode::kInternal, "no piece of the face contains the point");
-  const double du = u - piece->ou, dv = v - piece->ov;
-  const double s = std::clamp(piece->su * du + piece->sv * dv, 0.0, 1.0);
-  const double t = std::clamp(piece->tu * du + piece->tv * dv, 0.0, 1.0);
+}
+
+void FaceProgram::evaluate(int subface, double u, double v, double* out, std::vector<double>& scratch) const {
+  (void)scratch;
+  const std::array<double, 2> uv = {u, v};
+  thread_local RowMatrix rows;
+  evaluate_many(subface, &uv, 1, rows);
+  std::copy(rows.data(), rows.data() + rows.size(), out);
+}
+
+void FaceProgram::evaluate_many(int subface, const std::array<double, 2>* uvs, size_t count, RowMatrix& out) const {
   const int m = size_;
-  // Weights in the piece's (s, t): rows N, N_s, N_t, N_ss, N_st, N_tt.
-  scratch.resize(6 * static_cast<size_t>(m) + 6 * static_cast<size_t>(piece->matrix.rows()));
-  double* st = scratch.data();
-  std::fill(st, st + 6 * m, 0.0);
-  const RowMatrix& mat = piece->matrix;
-  if (piece->config) {
-    double* local = st + 6 * m;
-    const int k = piece->config->size();
-    piece->config->evaluate(s, t, local);
-    for (int r = 0; r < 6; ++r) {
-      for (int i = 0; i < k; ++i) {
-        const double w = local[r * k + i];
-        if (w == 0.0) continue;
-        const double* src = mat.row(i).data();
-        double* dst = st + r * m;
-        for (int j = 0; j < m; ++j) dst[j] += w * src[j];
-      }
+  out.resize(static_cast<Eigen::Index>(6 * count), m);
+  // Each point's piece and, on an extraordinary piece, its ring and sub-patch.
+  struct Point {
+    const Piece* piece;
+    EvConfig::Location at;
+    size_t index;
+  };
+  std::vector<Point> points(count);
+  for (size_t i = 0; i < count; ++i) {
+    const Piece& p = piece_at(subface, uvs[i][0], uvs[i][1]);
+    const double du = uvs[i][0] - p.ou, dv = uvs[i][1] - p.ov;
+    const double s = std::clamp(p.su * du + p.sv * dv, 0.0, 1.0), t = std::clamp(p.tu * du + p.tv * dv, 0.0, 1.0);
+    EvConfig::Location at;
+    if (p.config) {
+      at = EvConfig::locate(s, t);
+    } else {
+      at.a = s, at.b = t;
     }
-  } else {
-    double basis[6][16];
-    bspline_basis(s, t, basis);
-    for (int r = 0; r < 6; ++r) {
-      for (int i = 0; i < 16; ++i) {
-        const double w = basis[r][i];
-        if (w == 0.0) continue;
-        const double* src = mat.row(i).data();
-        double* dst = st + r * m;
-        for (int j = 0; j < m; ++j) dst[j] += w * src[j];
-      }
-    }
+    points[i] = {&p, at, i};
   }
-  // Chain rule to (u, v): the map is affine.
-  const double su = piece->su, sv = piece->sv, tu = piece->tu, tv = piece->tv;
-  for (int j = 0; j < m; ++j) {
-    const double f = st[j], fs = st[m + j], ft = st[2 * m + j];
-    const double fss = st[3 * m + j], fst = st[4 * m + j], ftt = st[5 * m + j];
-    out[j] = f;
-    out[m + j] = fs * su + ft * tu;
-    out[2 * m + j] = fs * sv + ft * tv;
-    out[3 * m + j] = fss * su * su + 2.0 * fst * su * tu + ftt * tu * tu;
-    out[4 * m + j] = fss * su * sv + fst * (su * tv + sv * tu) + ftt * tu * tv;
-    out[5 * m + j] = fss * sv * sv + 2.0 * fst * sv * tv + ftt * tv * tv;
+  std::stable_sort(points.begin(), points.end(), [](const Point& x, const Point& y) {
+    return x.piece != y.piece ? x.piece < y.piece
+                              : (x.at.ring != y.at.ring ? x.at.ring < y.at.ring : x.at.patch < y.at.patch);
+  });
+  // One group: the points of one polynomial piece: (6 P x 16) basis rows times its 16 control
+  // points (over the neighbourhood of an extraordinary piece, then over the local points).
+  RowMatrix basis, local, result, deep;
+  for (size_t first = 0; first < count;) {
+    size_t last = first + 1;
+    while (last < count && points[last].piece == points[first].piece && points[last].at.ring == points[first].at.ring &&
+           points[last].at.patch == points[first].at.patch) {
+      ++last;
+    }
+    const Piece& piece = *points[first].piece;
+    const auto group = static_cast<Eigen::Index>(last - first);
+    if (piece.config && points[first].at.ring == 0) {  // the extraordinary vertex itself
+      local.resize(6, piece.config->size());
+      piece.config->evaluate(0.0, 0.0, local.data());
+      result.noalias() = local * piece.matrix;
+      for (size_t i = first; i < last; ++i) out.middleRows(static_cast<Eigen::Index>(6 * points[i].index), 6) = result;
+    } else {
+      basis.resize(6 * group, 16);
+      for (size_t i = first; i < last; ++i) {
+        double* rows = basis.row(static_cast<Eigen::Index>(6 * (i - first))).data();
+        if (piece.config) {
+          EvConfig::basis_rows(points[i].at, rows);
+        } else {
+          double b[6][16];
+          bspline_basis(points[i].at.a, points[i].at.b, b);
+          std::copy(&b[0][0], &b[0][0] + 96, rows);
+        }
+      }
+      if (piece.config) {
+        local.noalias() = basis * piece.config->ring_points(points[first].at.ring, points[first].at.patch, deep);
+        for (Eigen::Index r = 0; r < group; ++r) local.row(6 * r) += piece.config->limit_mask();
+        result.noalias() = local * piece.matrix;
+      } else {
+        result.noalias() = basis * piece.matrix;
+      }
+      for (size_t i = first; i < last; ++i) {
+        out.middleRows(static_cast<Eigen::Index>(6 * points[i].index), 6) =
+            result.middleRows(static_cast<Eigen::Index>(6 * (i - first)), 6);
+      }
+    }
+    for (size_t i = first; i < last; ++i) {
+      to_subface(piece, out.middleRows(static_cast<Eigen::Index>(6 * points[i].index), 6));
+    }
+    first = last;
   }
 }
 

@@ -84,6 +84,19 @@ class EvConfig {
   /// spanning the tangent plane there (see LimitEvaluator's documentation), second rows zero.
   void evaluate(double s, double t, double* out) const;
 
+  /// Where (s, t) lies: ring n >= 1 (0 at the corner itself), sub-patch 1..3 and the
+  /// sub-patch's own (a, b).
+  struct Location {
+    int ring = 0, patch = 0;
+    double a = 0.0, b = 0.0;
+  };
+  static Location locate(double s, double t);
+  /// The 16 control points of that ring's sub-patch without the limit mask: P_patch B^(ring-1)
+  /// (16 x K); `deep` is storage for rings beyond the table.
+  const RowMatrix& ring_points(int ring, int patch, RowMatrix& deep) const;
+  /// The B-spline rows (6 x 16, row-major) of a location, scaled to (s, t) derivatives.
+  static void basis_rows(const Location& at, double* out);
+
   const Eigen::RowVectorXd& limit_mask() const { return limit_; }
   const RowMatrix& subdivision_matrix() const { return subdivision_; }
 
@@ -134,6 +147,9 @@ class FaceProgram {
   /// coordinates): `out` is 6 x size() row-major, rows N, N_u, N_v, N_uu, N_uv, N_vv.
   /// `scratch` is reused storage.
   void evaluate(int subface, double u, double v, double* out, std::vector<double>& scratch) const;
+  /// The same at many points of one sub-face, grouped by polynomial piece so that each group is
+  /// two small matrix products: `out` is (6 count) x size(), rows 6i .. 6i+5 for point i.
+  void evaluate_many(int subface, const std::array<double, 2>* uvs, size_t count, RowMatrix& out) const;
 
   /// EvConfig::corner_rule for the square cell of side `size` at corner `corner` of sub-face
   /// `subface`, in the cell's point order (i + g j, point i along u, j along v). False if the
@@ -151,6 +167,9 @@ class FaceProgram {
     const EvConfig* config = nullptr;               // an extraordinary piece, or a regular patch
     RowMatrix matrix;                               // 16 x size() (regular) or K x size() (EvConfig)
   };
+  const Piece& piece_at(int subface, double u, double v) const;
+  /// Rows 6i .. 6i+5 of `out` from (s, t) derivatives to (u, v) derivatives (the map is affine).
+  static void to_subface(const Piece& piece, Eigen::Ref<RowMatrix> rows);
   /// The extraordinary piece at that corner, if a dyadic square of that size there lies in it.
   const Piece* corner_piece(int subface, int corner, double size) const;
 

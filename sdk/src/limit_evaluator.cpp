@@ -330,6 +330,12 @@ void LimitEvaluator::face_stencils(int32_t face, int32_t subface, const std::vec
     column[k] = static_cast<int32_t>(it - out_indices.begin());
     if (it == out_indices.end()) out_indices.push_back(fs.support[k]);
   }
+  if (fs.program) {  // every point of the face at once, no repeated control points
+    thread_local internal::RowMatrix rows;
+    fs.program->evaluate_many(subface, uvs.data(), uvs.size(), rows);
+    out_weights = rows;
+    return;
+  }
   out_weights.setZero(static_cast<Eigen::Index>(6 * uvs.size()), static_cast<Eigen::Index>(out_indices.size()));
   std::vector<double> w(6 * n), scratch;
   for (size_t i = 0; i < uvs.size(); ++i) {
@@ -347,20 +353,17 @@ void LimitEvaluator::Impl::evaluate_many(int32_t face, int32_t subface, const st
                                          Vec3* out_du, Vec3* out_dv, std::vector<double>& scratch) const {
   const internal::FaceSurface& fs = faces[static_cast<size_t>(face)];
   if (fs.program) {
-    const size_t n = fs.support.size();
-    std::vector<double> w(6 * n);
+    internal::RowMatrix rows;
+    fs.program->evaluate_many(subface, uvs, count, rows);
+    Eigen::MatrixX3d x(static_cast<Eigen::Index>(fs.support.size()), 3);
+    for (size_t k = 0; k < fs.support.size(); ++k) {
+      x.row(static_cast<Eigen::Index>(k)) = positions[static_cast<size_t>(fs.support[k])].transpose();
+    }
     for (size_t i = 0; i < count; ++i) {
-      weights(SurfacePoint{face, subface, uvs[i][0], uvs[i][1]}, w.data(), scratch);
-      Vec3 p = Vec3::Zero(), du = Vec3::Zero(), dv = Vec3::Zero();
-      for (size_t k = 0; k < n; ++k) {
-        const Vec3& x = positions[static_cast<size_t>(fs.support[k])];
-        p += w[k] * x;
-        du += w[n + k] * x;
-        dv += w[2 * n + k] * x;
-      }
-      out_position[i] = p;
-      if (out_du) out_du[i] = du;
-      if (out_dv) out_dv[i] = dv;
+      const auto r = static_cast<Eigen::Index>(6 * i);
+      out_position[i] = (rows.row(r) * x).transpose();
+      if (out_du) out_du[i] = (rows.row(r + 1) * x).transpose();
+      if (out_dv) out_dv[i] = (rows.row(r + 2) * x).transpose();
     }
     return;
   }
