@@ -29,6 +29,7 @@
 
 #include <Eigen/Core>
 #include <opensubdiv/far/topologyLevel.h>
+#include <opensubdiv/far/topologyRefiner.h>
 
 namespace softshell::internal {
 
@@ -69,6 +70,26 @@ RowMatrix grid_rows(const PatchGrid& grid, const RowMatrix& vertex_weights);
 /// Uniform cubic B-spline tensor basis at (s, t) in the middle cell: 6 x 16, rows N, N_s, N_t,
 /// N_ss, N_st, N_tt, columns as PatchGrid.
 void bspline_basis(double s, double t, double out[6][16]);
+
+/// The position of `v` in a vertex list, or -1.
+int position_in(Far::ConstIndexArray verts, Far::Index v);
+
+/// A Far refiner of the topology in a signature (EDGE_AND_CORNER boundaries: the artificial
+/// boundary of a 1-ring does not reach the points its face needs), refined uniformly `levels`
+/// times, with every refined vertex as weights over the base vertices.
+struct LocalRefinement {
+  std::unique_ptr<Far::TopologyRefiner> refiner;
+  std::vector<RowMatrix> weights;  // per level: vertices x base vertices
+  int base_size = 0;
+};
+LocalRefinement refine_local(const std::vector<int32_t>& signature, int levels);
+
+/// The child face of `face` (next level) that contains child vertex `child`, or -1.
+Far::Index child_face_with(const Far::TopologyLevel& parent, const Far::TopologyLevel& child_level, Far::Index face,
+                           Far::Index child);
+
+/// Gauss-Legendre points and weights on [0, 1].
+void gauss_legendre_01(int n, std::vector<double>& points, std::vector<double>& weights);
 
 /// The neighbourhood of a quad with one extraordinary corner (see the file comment).
 class EvConfig {
