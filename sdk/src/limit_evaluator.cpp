@@ -123,14 +123,9 @@ Result<LimitEvaluator> LimitEvaluator::create(const ControlMesh& mesh, const Opt
     impl->programs = std::make_shared<internal::FaceProgramStore>();
     const Far::TopologyLevel& base = impl->refiner->GetLevel(0);
 
-    // Faces whose 1-ring touches a sharp feature keep Bfr (only with sharp_features).
-    std::vector<char> sharp(static_cast<size_t>(mesh.num_vertices()), 0);
-    for (const Crease& c : impl->mesh.creases()) {
-      if (c.sharpness > 0.0f) sharp[static_cast<size_t>(c.v0)] = sharp[static_cast<size_t>(c.v1)] = 1;
-    }
-    for (const Corner& c : impl->mesh.corners()) {
-      if (c.sharpness > 0.0f) sharp[static_cast<size_t>(c.vertex)] = 1;
-    }
+    // With sharp features the whole surface is Bfr's (creases change the rules level by level;
+    // mixing approximate and exact faces around one vertex would open cracks).
+    const bool bfr_only = impl->mesh.has_sharpness();
 
     impl->faces.resize(static_cast<size_t>(mesh.num_faces()));
     std::vector<int32_t> sorted;
@@ -140,12 +135,10 @@ Result<LimitEvaluator> LimitEvaluator::create(const ControlMesh& mesh, const Opt
       internal::FaceSurface& fs = impl->faces[static_cast<size_t>(f)];
       if (!factory.FaceHasLimitSurface(f)) continue;  // ghost face (BoundaryMode::kNone)
       fs.has_surface = true;
-      if (!internal::extract_neighbourhood(base, f, 0, hood)) {
-        fail(ErrorCode::kUnprocessable, "the faces around face " + std::to_string(f) + " do not form a manifold fan");
-      }
-      const bool near_sharp = std::any_of(hood.vertices.begin(), hood.vertices.end(),
-                                          [&](int32_t v) { return sharp[static_cast<size_t>(v)] != 0; });
-      if (!near_sharp && !internal::regular_grid(base, f, 0, grid)) {
+      if (!bfr_only && !internal::regular_grid(base, f, 0, grid)) {
+        if (!internal::extract_neighbourhood(base, f, 0, hood)) {
+          fail(ErrorCode::kUnprocessable, "the faces around face " + std::to_string(f) + " do not form a manifold fan");
+        }
         fs.program = impl->programs->get(hood.signature);
         fs.support.assign(hood.vertices.begin(), hood.vertices.end());
         impl->max_support = std::max(impl->max_support, static_cast<int32_t>(fs.support.size()));

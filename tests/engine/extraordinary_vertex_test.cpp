@@ -10,6 +10,7 @@
 
 #include "shell_benchmarks.h"
 #include "softshell/engine/solver.h"
+#include "softshell/engine/stresses.h"
 #include "test_meshes.h"
 
 namespace softshell::engine {
@@ -153,6 +154,34 @@ TEST(ExtraordinaryVertices, QuadsNextToNonQuadsAreIntegratedPerPiece) {
     if (wanted.count(q.point.face)) u_values[q.point.face].insert(q.point.u);
   }
   for (int32_t f : wanted) EXPECT_EQ(u_values[f].size(), 8u) << "face " << f;  // two cells of 4 x 4 along u
+}
+
+// At an extraordinary vertex itself the curvature vanishes or diverges: the stress is that of
+// the field next to it (finite, and the same from every face around the vertex up to the
+// field's variation over 2^-10 of a face), at the vertex's position.
+TEST(ExtraordinaryVertices, StressAtTheVertexIsTheStressNextToIt) {
+  const ControlMesh mesh = test::fan_plate(5, 2);
+  auto model = ShellModel::build(mesh, Material{1.0e6, 0.3, 0.01, 1.0}).value();
+  const std::vector<char> boundary = test::boundary_points(mesh);
+  DeformationRequest request;
+  for (int32_t v = 0; v < mesh.num_vertices(); ++v) {
+    if (boundary[static_cast<size_t>(v)]) request.vertex_constraints.push_back({v, kAxisAll, Vec3::Zero()});
+  }
+  request.surface_load = Vec3(0.0, 0.0, -1.0);
+  Solver solver(model, std::make_shared<FactorCache>());
+  const Eigen::VectorXd u = solver.solve(request).value().displacement;
+  double low = 1e300, high = 0.0;
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    if (mesh.face(f)[0] != 0) continue;  // the faces at the vertex, corner 0
+    const StressSample at = evaluate_stress(*model, u, {f, 0, 0.0, 0.0});
+    const StressSample next = evaluate_stress(*model, u, {f, 0, 1.0 / 1024.0, 1.0 / 1024.0});
+    EXPECT_LT(at.position.norm(), 1e-12);  // the vertex's limit point (the fan is symmetric)
+    EXPECT_EQ(at.von_mises(), next.von_mises());
+    EXPECT_GT(at.von_mises(), 0.0);
+    low = std::min(low, at.von_mises());
+    high = std::max(high, at.von_mises());
+  }
+  EXPECT_LT(high - low, 0.05 * high);  // the same field seen from five faces
 }
 
 }  // namespace

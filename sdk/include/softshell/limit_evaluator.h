@@ -1,7 +1,7 @@
 #pragma once
 /// \file
 /// \brief `LimitEvaluator`: exact evaluation of the Catmull-Clark limit surface and of its basis
-/// functions (limit stencils) with OpenSubdiv Bfr.
+/// functions (limit stencils), at every point including extraordinary vertices.
 
 #include <array>
 #include <cstdint>
@@ -61,21 +61,21 @@ struct LimitSample {
 ///
 /// At an extraordinary vertex itself (the corner of a face or sub-face where it sits) the
 /// derivatives with respect to the face's (u, v) vanish (valence 3) or diverge (valence 5 and
-/// more). There the stencil gives the exact limit
-/// position (OpenSubdiv's limit mask), for du and dv two vectors that span the exact tangent
-/// plane with du x dv along the surface normal (inside the mesh: OpenSubdiv's limit tangent
-/// masks rotated onto the face's two edges at that corner; on the boundary: the two dominant
-/// left eigenvectors of the local subdivision matrix), and zero second derivatives. The normal
-/// is exact there; the lengths of du and dv, and curvatures, are not derivatives. The same
-/// holds closer than 2^-1000 to such a vertex.
+/// more). There the stencil gives the exact limit position (the same as OpenSubdiv's limit
+/// mask), for du and dv two vectors that span the exact tangent plane with du x dv along the
+/// surface normal (inside the mesh: OpenSubdiv's limit tangent masks rotated onto the face's two
+/// edges at that corner; on the boundary: the two dominant left eigenvectors of the local
+/// subdivision matrix), and zero second derivatives. The normal is exact there; the lengths of
+/// du and dv, and curvatures, are not derivatives. The same holds closer than 2^-1000 to such a
+/// vertex.
 ///
 /// Copies are cheap and share the same immutable evaluator.
 /// Thread-safety: all const member functions may be called concurrently.
 class LimitEvaluator {
  public:
   struct Options {
-    /// Bfr refinement levels around extraordinary vertices of faces next to sharp features, with
-    /// `sharp_features` only (the smooth surface is evaluated exactly and ignores this). Range 1..10.
+    /// Bfr refinement levels around extraordinary vertices, with `sharp_features` on a tagged
+    /// mesh only (the smooth surface is evaluated exactly and ignores this). Range 1..10.
     int approx_level_smooth = 3;
     /// Bfr refinement levels around sharp features, with `sharp_features` only (OpenSubdiv
     /// default 6). Range 1..10.
@@ -84,8 +84,9 @@ class LimitEvaluator {
     /// uses the smooth limit surface (a sharp kink would act as a hinge in a Kirchhoff-Love shell),
     /// and a client must evaluate, render and pick on the same surface the server simulates, or
     /// a (face, u, v) would name different points. Turn it on only to display tagged meshes
-    /// that are not simulated. Faces whose 1-ring touches a tagged edge or vertex are then
-    /// OpenSubdiv Bfr's approximation (Gregory patches `approx_level_*` levels deep), not exact.
+    /// that are not simulated. On a tagged mesh the surface is then OpenSubdiv Bfr's, which
+    /// approximates it next to extraordinary vertices and semi-sharp features (Gregory patches
+    /// `approx_level_*` levels deep); the `ev_corner_*` functions answer false.
     bool sharp_features = false;
   };
 
