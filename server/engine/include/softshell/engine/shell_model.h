@@ -19,7 +19,7 @@
 
 namespace softshell::engine {
 
-/// How the shell is integrated (see README "Quadrature" for the accuracy/cost table).
+/// How the shell is integrated (see README "Extraordinary vertices and quadrature" for the accuracy/cost tables).
 struct QuadratureOptions {
   /// Gauss points per direction on every (sub-)cell: 4 integrates a bicubic patch's stiffness
   /// integrand well (GeoPDEs uses p + 1). Range 1..10.
