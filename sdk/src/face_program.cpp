@@ -189,11 +189,35 @@ void FaceProgram::to_subface(const Piece& piece, Eigen::Ref<RowMatrix> rows) {
 }
 
 void FaceProgram::evaluate(int subface, double u, double v, double* out, std::vector<double>& scratch) const {
-  (void)scratch;
-  const std::array<double, 2> uv = {u, v};
-  thread_local RowMatrix rows;
-  evaluate_many(subface, &uv, 1, rows);
-  std::copy(rows.data(), rows.data() + rows.size(), out);
+  // One point: the group of evaluate_many without its bookkeeping (no allocation once the
+  // scratch has grown).
+  const Piece& p = piece_at(subface, u, v);
+  const double du = u - p.ou, dv = v - p.ov;
+  const double s = std::clamp(p.su * du + p.sv * dv, 0.0, 1.0), t = std::clamp(p.tu * du + p.tv * dv, 0.0, 1.0);
+  const auto m = static_cast<Eigen::Index>(size_);
+  Eigen::Map<RowMatrix> result(out, 6, m);
+  Eigen::Matrix<double, 6, 16, Eigen::RowMajor> basis;
+  if (p.config) {
+    const EvConfig::Location at = EvConfig::locate(s, t);
+    const auto k = static_cast<Eigen::Index>(p.config->size());
+    scratch.resize(static_cast<size_t>(6 * k));
+    Eigen::Map<RowMatrix> local(scratch.data(), 6, k);
+    if (at.ring == 0) {
+      p.config->evaluate(0.0, 0.0, local.data());
+    } else {
+      EvConfig::basis_rows(at, basis.data());
+      thread_local RowMatrix deep;
+      local.noalias() = basis.lazyProduct(p.config->ring_points(at.ring, at.patch, deep));
+      local.row(0) += p.config->limit_mask();
+    }
+    result.noalias() = local.lazyProduct(p.matrix);
+  } else {
+    double b[6][16];
+    bspline_basis(s, t, b);
+    std::copy(&b[0][0], &b[0][0] + 96, basis.data());
+    result.noalias() = basis.lazyProduct(p.matrix);
+  }
+  to_subface(p, result);
 }
 
 void FaceProgram::evaluate_many(int subface, const std::array<double, 2>* uvs, size_t count, RowMatrix& out) const {
