@@ -106,7 +106,7 @@ std::unique_ptr<EvConfig> EvConfig::build(const std::vector<int32_t>& signature)
   out->limit_ = power.row(0) * a;
   out->limit_ /= out->limit_.sum();
   if ((out->limit_ * a - out->limit_).cwiseAbs().maxCoeff() > 1e-12) {
-    fail(ErrorCode::kInternal, "the subdivision matrix around an extraordinary vertex has no limit mask");
+    return nullptr;  // no limit mask: not a configuration we can evaluate exactly
   }
 
   // B = A - 1 l has A's eigenvalues but 0 for 1; P_k A^(n-1) = 1 l + P_k B^(n-1) (P_k 1 = 1).
@@ -149,7 +149,7 @@ std::unique_ptr<EvConfig> EvConfig::build(const std::vector<int32_t>& signature)
   out->chart_ = chart;
   out->chart_ratio_ = (chart.transpose() * Eigen::MatrixXd(a) * chart).determinant();
   if (!(std::abs(out->chart_ratio_) < 1.0) || (Eigen::MatrixXd(a) * chart - chart * (chart.transpose() * Eigen::MatrixXd(a) * chart)).norm() > 1e-9) {
-    fail(ErrorCode::kInternal, "the dominant eigenvalues of the subdivision matrix at an extraordinary vertex are not separated");
+    return nullptr;  // e.g. valence 2: no separated tangent plane modes
   }
   std::vector<double> w(6 * static_cast<size_t>(k));
   out->evaluate(0.75, 0.75, w.data());
@@ -158,7 +158,7 @@ std::unique_ptr<EvConfig> EvConfig::build(const std::vector<int32_t>& signature)
   const Eigen::Matrix2d at_corner = out->tangents_ * chart;
   if (st.determinant() * at_corner.determinant() < 0.0) out->tangents_.row(1) *= -1.0;
   if (!(std::abs(at_corner.determinant()) > 0.0)) {
-    fail(ErrorCode::kInternal, "no tangent plane at an extraordinary vertex");
+    return nullptr;
   }
   return out;
 }

@@ -95,7 +95,8 @@ void gauss_legendre_01(int n, std::vector<double>& points, std::vector<double>& 
 class EvConfig {
  public:
   /// nullptr if the topology is not such a neighbourhood (the child's 1-ring has another
-  /// topology, or the other children are not regular patches).
+  /// topology, the other children are not regular patches) or has no separated pair of
+  /// dominant eigenvalues (valence 2).
   static std::unique_ptr<EvConfig> build(const std::vector<int32_t>& signature);
 
   int size() const { return size_; }
@@ -158,8 +159,8 @@ class EvConfig {
 class EvConfigStore;
 class FaceProgram {
  public:
-  /// Throws Exception(kUnprocessable) if the face cannot be split into regular and EvConfig pieces
-  /// within a few levels (which does not happen on a manifold mesh).
+  /// nullptr if the face cannot be split into regular and EvConfig pieces within a few levels
+  /// (a vertex of valence 2, where Catmull-Clark has no separated tangent plane modes).
   static std::unique_ptr<FaceProgram> build(const std::vector<int32_t>& signature, EvConfigStore& configs);
 
   /// Local points (the Neighbourhood's vertices).
@@ -208,7 +209,7 @@ class EvConfigStore {
   std::map<std::vector<int32_t>, std::unique_ptr<EvConfig>> configs_;
 };
 
-/// FacePrograms by signature.
+/// FacePrograms by signature (null for a face that is not evaluable exactly).
 class FaceProgramStore {
  public:
   const FaceProgram* get(const std::vector<int32_t>& signature);

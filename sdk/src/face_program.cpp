@@ -161,8 +161,7 @@ std::unique_ptr<FaceProgram> FaceProgram::build(const std::vector<int32_t>& sign
     }
     if (ok) return program;
   }
-  fail(ErrorCode::kUnprocessable,
-       "cannot set up the exact limit surface of a face with this neighbourhood (is the mesh a manifold?)");
+  return nullptr;  // e.g. a valence-2 vertex: not split into exact pieces within 4 levels
 }
 
 const FaceProgram::Piece& FaceProgram::piece_at(int subface, double u, double v) const {
@@ -351,7 +350,7 @@ bool FaceProgram::corner_normal_integral(int subface, int corner, double size, c
 const FaceProgram* FaceProgramStore::get(const std::vector<int32_t>& signature) {
   auto it = programs_.find(signature);
   if (it == programs_.end()) it = programs_.emplace(signature, FaceProgram::build(signature, configs_)).first;
-  return it->second.get();
+  return it->second.get();  // null: not evaluable exactly (remembered)
 }
 
 }  // namespace softshell::internal

@@ -135,14 +135,15 @@ Result<LimitEvaluator> LimitEvaluator::create(const ControlMesh& mesh, const Opt
       internal::FaceSurface& fs = impl->faces[static_cast<size_t>(f)];
       if (!factory.FaceHasLimitSurface(f)) continue;  // ghost face (BoundaryMode::kNone)
       fs.has_surface = true;
-      if (!bfr_only && !internal::regular_grid(base, f, 0, grid)) {
-        if (!internal::extract_neighbourhood(base, f, 0, hood)) {
-          fail(ErrorCode::kUnprocessable, "the faces around face " + std::to_string(f) + " do not form a manifold fan");
-        }
+      // Exact unless regular (Bfr is exact there) or at a non-manifold or valence-2 vertex
+      // (OpenSubdiv's own rules, Bfr's approximation).
+      if (!bfr_only && !internal::regular_grid(base, f, 0, grid) && internal::extract_neighbourhood(base, f, 0, hood)) {
         fs.program = impl->programs->get(hood.signature);
-        fs.support.assign(hood.vertices.begin(), hood.vertices.end());
-        impl->max_support = std::max(impl->max_support, static_cast<int32_t>(fs.support.size()));
-        continue;
+        if (fs.program) {
+          fs.support.assign(hood.vertices.begin(), hood.vertices.end());
+          impl->max_support = std::max(impl->max_support, static_cast<int32_t>(fs.support.size()));
+          continue;
+        }
       }
       if (!factory.InitVertexSurface(f, &fs.surface)) {
         fail(ErrorCode::kUnprocessable, "OpenSubdiv could not set up the limit surface of face " + std::to_string(f));

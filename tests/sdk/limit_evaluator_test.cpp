@@ -514,5 +514,40 @@ TEST(LimitEvaluator, ExtraordinaryCornerIntegralsAreTheSumsOfTheirRings) {
   EXPECT_GT(checked, 0);
 }
 
+// Topology the exact evaluation does not cover (an inner vertex of two faces, a non-manifold
+// vertex) is evaluated by OpenSubdiv Bfr instead of refused.
+TEST(LimitEvaluator, DegenerateTopologyIsStillEvaluated) {
+  const ControlMesh pillow({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)},
+                           std::vector<std::vector<int32_t>>{{0, 1, 2, 3}, {3, 2, 1, 0}});
+  std::vector<Vec3> points;
+  std::vector<std::vector<int32_t>> faces;
+  for (int j = 0; j < 3; ++j) {
+    for (int i = 0; i < 3; ++i) points.emplace_back(i, j, 0.0);
+  }
+  for (int j = 0; j < 2; ++j) {
+    for (int i = 0; i < 2; ++i) faces.push_back({j * 3 + i, j * 3 + i + 1, (j + 1) * 3 + i + 1, (j + 1) * 3 + i});
+  }
+  // A second 2 x 2 grid touching the first only at its corner point 8.
+  const auto base = static_cast<int32_t>(points.size());
+  for (int j = 0; j < 3; ++j) {
+    for (int i = 0; i < 3; ++i) {
+      if (i > 0 || j > 0) points.emplace_back(2 + i, 2 + j, 0.5);
+    }
+  }
+  auto id = [&](int i, int j) { return (i == 0 && j == 0) ? 8 : base + j * 3 + i - 1; };
+  for (int j = 0; j < 2; ++j) {
+    for (int i = 0; i < 2; ++i) faces.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)});
+  }
+  const ControlMesh bowtie(points, faces);
+  for (const ControlMesh* mesh : {&pillow, &bowtie}) {
+    auto ev = LimitEvaluator::create(*mesh);
+    ASSERT_TRUE(ev.ok()) << ev.error().message;
+    for (int32_t f = 0; f < mesh->num_faces(); ++f) {
+      const LimitStencil st = ev->stencil({f, 0, 0.3, 0.6});
+      EXPECT_NEAR(sum(st.position), 1.0, 1e-12);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace softshell

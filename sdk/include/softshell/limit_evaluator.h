@@ -57,7 +57,9 @@ struct LimitSample {
 /// refinement into bicubic pieces and, at each extraordinary vertex, into rings of bicubic
 /// pieces that shrink toward it, evaluated with the powers of the local subdivision matrix
 /// (Stam's exact evaluation). Derivative weights are the exact derivatives of the position
-/// weights at every (u, v), arbitrarily close to an extraordinary vertex.
+/// weights at every (u, v), arbitrarily close to an extraordinary vertex. (Faces at a
+/// non-manifold vertex or at an inner vertex of only two faces, where the scheme has no tangent
+/// plane modes of its own, are Bfr's approximation instead.)
 ///
 /// At an extraordinary vertex itself (the corner of a face or sub-face where it sits) the
 /// derivatives with respect to the face's (u, v) vanish (valence 3) or diverge (valence 5 and
