@@ -120,7 +120,6 @@ class EvConfig {
   static void basis_rows(const Location& at, double* out);
 
   const Eigen::RowVectorXd& limit_mask() const { return limit_; }
-  const RowMatrix& subdivision_matrix() const { return subdivision_; }
 
   /// A quadrature rule for the square [0, h]^2 at the corner, which holds infinitely many
   /// polynomial rings: the g x g Gauss rule with its weights multiplied by the returned factors
