@@ -75,3 +75,10 @@ if(SOFTSHELL_BUILD_BULLET OR SOFTSHELL_WANT_BULLET)
       INTERFACE_LINK_LIBRARIES "${_softshell_bullet_libs}")
   endif()
 endif()
+
+# CLI11 (header-only): the command lines of softshell-server and softshell-demo (--opt=value and
+# --opt value, --help, --version, validation, SOFTSHELL_* environment variables). A private build
+# dependency of those two programs only, so a consumer's find_package(softshell) never asks for it.
+if(PROJECT_NAME STREQUAL "softshell" AND NOT TARGET CLI11::CLI11)
+  find_package(CLI11 2.1 REQUIRED CONFIG)
+endif()
