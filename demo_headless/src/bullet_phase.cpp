@@ -96,8 +96,10 @@ class Footprints {
           const Vec3 d = x_[static_cast<size_t>(j)] - p;
           const double up = d.dot(st_.up);
           const Vec3 across = d - up * st_.up;
-          if (across.norm() > 1.5 * half_ || up < -0.5 * half_) continue;  // outside, or the shell's far side
+          if (across.norm() > 1.5 * half_ || up < -half_) continue;  // outside, or the shell's far side
+          // Nearly level, nothing higher, and no dome: a box rocks on tops more curved than 4 half edges.
           if (up > 0.1 * half_ || std::abs(n_[static_cast<size_t>(j)].dot(st_.up)) < 0.94) return false;
+          if (across.norm() <= half_ && up < -0.125 * half_) return false;
           if (across.norm() > 0.7 * half_) quarters |= 1 << ((across.dot(st_.e1) > 0) + 2 * (across.dot(st_.e2) > 0));
         }
       }

@@ -32,7 +32,8 @@ DeformationResult Context::deform(const DeformationRequest& extra, const std::st
 }
 
 double Context::probe_length() const {
-  return 0.1 * std::min(options.material.thickness, LinearRange::kAimDisplacementPerSize * stage.size);
+  // The model is linear, so a probe can be small enough to stay far inside the range anywhere.
+  return 1e-3 * std::min(options.material.thickness, LinearRange::kAimDisplacementPerSize * stage.size);
 }
 
 double Context::probe_force() const {

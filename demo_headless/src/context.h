@@ -69,7 +69,7 @@ struct Context {
   void check_stresses(const std::string& phase);
   /// Stresses of a result, if the server has them (if not, says so once in the notes).
   std::optional<StressField> stresses(uint32_t res_id, int level);
-  /// A small displacement for probes (m): a tenth of what the script might aim for.
+  /// A small displacement for probes (m): a thousandth of the thickness or of the aim.
   double probe_length() const;
   /// A force for probes (N) that moves the object by less than `probe_length`: the stiffness of a
   /// plate as wide as the object (E t^3 / size^2) is below that of any part of it.

@@ -128,9 +128,11 @@ std::optional<StressField> final_state(Context& c, int stress_level) {
   f.max_rotation = shape.rotation;
   std::optional<StressField> field = c.stresses(c.report.last_res_id, stress_level);
   if (field) {
-    f.max_von_mises = field->max.von_mises();
-    f.max_strain = *f.max_von_mises / c.options.material.youngs_modulus;
-    f.exceeds_yield = field->exceeds_yield;
+    Response with_stresses = shape;
+    add_stresses(with_stresses, *field, c.options.material);
+    f.max_von_mises = with_stresses.von_mises;
+    f.max_strain = with_stresses.strain;
+    f.exceeds_yield = field->exceeds_yield || (c.yield > 0.0 && *f.max_von_mises > c.yield);
   }
   std::error_code ec;
   std::filesystem::create_directories(c.options.out_dir, ec);

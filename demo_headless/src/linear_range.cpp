@@ -80,7 +80,11 @@ std::optional<StressField> stresses_of(Session& session, const GeomId& id, uint3
 }
 
 void add_stresses(Response& r, const StressField& field, const Material& material) {
-  r.von_mises = field.max.von_mises();
+  // The field's maximum is over the quadrature points; the queried points (tessellation
+  // vertices, one of them at a grabbed point) can lie higher.
+  double max = field.max.von_mises();
+  for (const StressSample& s : field.samples) max = std::max(max, s.von_mises());
+  r.von_mises = max;
   r.strain = *r.von_mises / material.youngs_modulus;
   r.exceeds_yield = field.exceeds_yield;
 }

@@ -62,7 +62,7 @@ double scale_to_aims(const Response& probe, double size, const Material& materia
 std::optional<StressField> stresses_of(Session& session, const GeomId& id, uint32_t res_id, int level, double yield,
                                        std::string& why_not);
 
-/// Adds a stress field's maxima to a response.
+/// Adds a stress field's maxima (over its quadrature points and its samples) to a response.
 void add_stresses(Response& r, const StressField& field, const Material& material);
 
 /// The worst response of each phase of the script, and the warnings they call for.

@@ -91,7 +91,7 @@ void draw_ground(Renderer& r, const Stage& st, const Bounds& b) {
 void draw_supports(Renderer& r, const Stage& st) {
   TriMesh marks;
   for (const Vec3& p : st.floor_points) marks.append(sphere(p, 0.006 * st.size, kContact));
-  for (const Vec3& p : st.pin_points) marks.append(sphere(p, 0.012 * st.size, kPin));
+  for (const Vec3& p : st.pin_points) marks.append(sphere(p, 0.008 * st.size, kPin));
   r.draw(marks.shaded());
 }
 
@@ -110,7 +110,7 @@ void draw_ghost(Renderer& r, const View& view, double size) {
 }
 
 void caption(Renderer& r, const std::string& title, const Shape& s, bool ghost) {
-  r.text(14, 14, title, kInk, 2);
+  r.paragraph(14, 14, title, kInk, 2, r.width() - 110);
   std::string note = s.factor > 1.0 ? "displacements drawn " + format("%g", s.factor) + "x" : "";
   if (ghost) note += std::string(note.empty() ? "" : "; ") + "the ghost is the rest shape";
   r.text(14, r.height() - 24, note, kInk, 1);
@@ -130,8 +130,9 @@ std::string bullet_caption(const Snapshot& s) {
     on += b.on_shell;
   }
   const int n = static_cast<int>(s.bodies.size());
-  std::string where = on == n ? (n == 1 ? "resting on the shell" : "all resting on the shell")
-                              : std::to_string(on) + " on the shell, " + std::to_string(n - on) + " fell off";
+  if (n == 1) return "Bullet: a box of " + masses + (on ? ", resting on the shell" : ", which fell off the shell");
+  const std::string where = on == n ? "all resting on the shell"
+                                    : std::to_string(on) + " resting on the shell, " + std::to_string(n - on) + " fell off";
   return "Bullet: boxes of " + masses + ", " + where;
 }
 
@@ -209,13 +210,22 @@ void draw_before(Context& c) {
   b.add(c.view->rest_vertices);
   Renderer r(c.options.picture_width, c.options.picture_height, camera_for(st, b, 1.0));
   draw_ground(r, st, b);
+  // Parts held fixed (too coarse to bend) in a darker blue-grey.
+  std::vector<Rgb> colours(c.view->rest_vertices.size(), Rgb{190, 190, 195});
+  for (size_t i = 0; i < colours.size(); ++i) {
+    const int part = st.part_of_face[static_cast<size_t>(c.view->surface.vertex_points()[i].face)];
+    if (st.parts[static_cast<size_t>(part)].hold == Part::Hold::kFixed) colours[i] = {120, 135, 160};
+  }
   ShadedMesh rest{&c.view->rest_vertices, &c.view->rest_normals, &c.view->surface.triangles()};
+  rest.colours = &colours;
   r.draw(rest);
   draw_supports(r, st);
-  r.text(14, 14, "before: " + c.report.mesh + " (" + std::to_string(c.report.control_points) + " control points)", kInk, 2);
-  r.text(14, 40, std::string(1, st.up_name()) + " up" + (st.up_detected ? " (detected)" : "") + "; " + st.describe_supports(),
-         kInk, 1);
-  r.text(14, r.height() - 24, "dark dots: floor contacts held; red: pins", kInk, 1);
+  const int y = r.paragraph(14, 14, "before: " + c.report.mesh + " (" + std::to_string(c.report.control_points) + " control points)",
+                            kInk, 2, r.width() - 28);
+  r.paragraph(14, y + 4, std::string(1, st.up_name()) + " up" + (st.up_detected ? " (detected)" : "") + "; " + st.describe_supports(),
+              kInk, 1, r.width() - 28);
+  r.text(14, r.height() - 24,
+         std::string("dark dots: floor contacts held; red: pins") + (st.fixed_parts ? "; blue-grey: parts held fixed" : ""), kInk, 1);
   save(c, r, "before.png");
 }
 

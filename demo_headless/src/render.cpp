@@ -34,8 +34,8 @@ Camera Camera::framing(const Vec3& lo, const Vec3& hi, const Vec3& from, const V
   Camera c;
   c.target = 0.5 * (lo + hi);
   const double radius = 0.5 * (hi - lo).norm();
-  // The bounding sphere just fits the view (a little tighter: boxes are not spheres).
-  const double distance = 0.85 * radius / std::tan(0.5 * c.fov_deg * 3.14159265358979 / 180.0);
+  // The bounding sphere just fits the view, with room for the caption.
+  const double distance = 1.05 * radius / std::tan(0.5 * c.fov_deg * 3.14159265358979 / 180.0);
   c.eye = c.target + distance * from.normalized();
   c.up = up;
   return c;
@@ -158,11 +158,12 @@ void Renderer::draw(const ShadedMesh& mesh) {
         float& stored = depth_[static_cast<size_t>(y * w_ + x)];
         auto& out = colour_[static_cast<size_t>(y * w_ + x)];
         if (mesh.ghost) {
-          if (depth + mesh.ghost_bias >= stored) continue;
+          // Fades in over a few biases in front of what is drawn, so its edges are soft.
+          const double in_front = stored - depth - mesh.ghost_bias;
+          if (!(in_front > 0.0)) continue;
+          const double alpha = mesh.opacity * std::min(1.0, in_front / (3.0 * mesh.ghost_bias + 1e-300));
           const auto c3 = shade(mesh, tri, w0, w1, w2, light, view_dir);
-          for (size_t k = 0; k < 3; ++k) {
-            out[k] = static_cast<float>((1.0 - mesh.opacity) * out[k] + mesh.opacity * c3[k]);
-          }
+          for (size_t k = 0; k < 3; ++k) out[k] = static_cast<float>((1.0 - alpha) * out[k] + alpha * c3[k]);
           continue;
         }
         if (depth >= stored) continue;
@@ -186,6 +187,32 @@ void Renderer::fill_rect(double x0, double y0, double x1, double y1, const Rgb& 
 int Renderer::text_width(const std::string& s, int scale) {
   std::string copy = s;
   return stb_easy_font_width(copy.data()) * scale;
+}
+
+int Renderer::paragraph(int x, int y, const std::string& s, const Rgb& colour, int scale, int max_width) {
+  std::string line, word;
+  const int line_height = 12 * scale;
+  const auto flush = [&] {
+    if (!line.empty()) text(x, y, line, colour, scale);
+    y += line_height;
+    line.clear();
+  };
+  for (size_t i = 0; i <= s.size(); ++i) {
+    if (i < s.size() && s[i] != ' ') {
+      word += s[i];
+      continue;
+    }
+    const std::string candidate = line.empty() ? word : line + " " + word;
+    if (!line.empty() && text_width(candidate, scale) > max_width) {
+      flush();
+      line = word;
+    } else {
+      line = candidate;
+    }
+    word.clear();
+  }
+  flush();
+  return y;
 }
 
 void Renderer::label(double x, double y, const std::string& s, const Rgb& colour) {

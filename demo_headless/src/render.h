@@ -69,6 +69,8 @@ class Renderer {
   void colour_bar(const std::string& title, double min, double max, const std::string& unit);
   /// Text at pixel (x, y) of the final image (top-left origin).
   void text(int x, int y, const std::string& s, const Rgb& colour, int scale = 2);
+  /// Text wrapped into lines of at most `max_width` pixels; returns the y below the last line.
+  int paragraph(int x, int y, const std::string& s, const Rgb& colour, int scale, int max_width);
   /// Text on a light box, centred on (x, y): a label next to something drawn.
   void label(double x, double y, const std::string& s, const Rgb& colour);
   /// Width in pixels of `s` drawn by `text` at `scale`.

@@ -16,7 +16,7 @@ struct Reach {
   Pick pick;
 };
 
-// Puts a hand at 0.3 sizes from the rest sample `sample`, coming from `approach` (or along the
+// Puts a hand at 0.15 sizes from the rest sample `sample`, coming from `approach` (or along the
 // surface normal if something else is in the way), and casts its ray at the sample.
 Reach reach(const Context& c, int32_t sample, const Vec3& approach, const char* what) {
   if (sample < 0) fail(ErrorCode::kInternal, std::string("no point of the object for the ") + what);
@@ -24,7 +24,7 @@ Reach reach(const Context& c, int32_t sample, const Vec3& approach, const char* 
   const Vec3 target = view.surface.vertices()[static_cast<size_t>(sample)];
   Vec3 normal = view.surface.normals()[static_cast<size_t>(sample)];
   if (normal.dot(approach) < 0.0) normal = -normal;
-  const double distance = 0.3 * c.stage.size;
+  const double distance = 0.15 * c.stage.size;
   // A ray at a vertex on an open boundary can pass just outside it: then aim into a triangle there.
   std::vector<Vec3> aims = {target};
   for (const auto& tri : view.surface.triangles()) {

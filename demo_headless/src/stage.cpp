@@ -238,6 +238,28 @@ bool may_rock(const std::vector<Vec3>& points, double size) {
   return true;
 }
 
+// At most kMaxFloorPoints of a part's contact points, spread over its contact region (farthest
+// point sampling from the one furthest from its centroid): each costs the solver three rows.
+std::vector<size_t> spread(const std::vector<size_t>& contacts, const FloorContact& contact, const View& view, const Part& part,
+                           const Vec3& up) {
+  if (contacts.size() <= static_cast<size_t>(Part::kMaxFloorPoints)) return contacts;
+  std::vector<Vec3> x;
+  for (size_t k : contacts) {
+    const Vec3 p = view.evaluator.evaluate(contact.points[k]).position - part.centroid;
+    x.push_back(p - p.dot(up) * up);
+  }
+  std::vector<double> distance(x.size());
+  for (size_t i = 0; i < x.size(); ++i) distance[i] = x[i].norm();
+  std::vector<size_t> out;
+  while (out.size() < static_cast<size_t>(Part::kMaxFloorPoints)) {
+    const size_t next = static_cast<size_t>(std::max_element(distance.begin(), distance.end()) - distance.begin());
+    out.push_back(contacts[next]);
+    for (size_t i = 0; i < x.size(); ++i) distance[i] = std::min(distance[i], (x[i] - x[next]).norm());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
 // 3-2-1 pins: all of A's displacement, B's across the line AB, C's across the plane ABC: the six
 // components that fix a rigid body and nothing more.
 void pin(const View& view, Stage& stage, const std::array<int32_t, 3>& at) {
@@ -282,6 +304,8 @@ void hold(const ControlMesh& mesh, const View& view, Stage& stage, const Resting
   for (size_t p = 0; p < stage.parts.size(); ++p) {
     Part& part = stage.parts[p];
     if (part.hold == Part::Hold::kFloor) {
+      part.touching = static_cast<int>(contacts[p].size());
+      contacts[p] = spread(contacts[p], resting.contact, view, part, stage.up);
       std::vector<Vec3> at;
       for (size_t k : contacts[p]) at.push_back(view.evaluator.evaluate(resting.contact.points[k]).position);
       part.glued = may_rock(at, stage.size);
@@ -343,7 +367,12 @@ std::string Stage::describe_supports() const {
   const bool glued = std::any_of(parts.begin(), parts.end(), [](const Part& p) { return p.glued; });
   char within[48];
   std::snprintf(within, sizeof within, " within %.3g mm of it", contact_tolerance * 1000.0);
-  const std::string floor = count(floor_points.size(), "contact point") + within + (glued ? ", held flat" : "");
+  int touching = 0;
+  for (const Part& p : parts) touching += p.touching;
+  const std::string floor = (touching > static_cast<int>(floor_points.size()) ? "held at " + std::to_string(floor_points.size()) +
+                                                                                   " of its " + count(static_cast<size_t>(touching), "contact point")
+                                                                             : count(floor_points.size(), "contact point")) +
+                            within + (glued ? ", held flat" : "");
   if (parts.size() == 1) {
     return resting ? "rests on the floor (" + floor + ")" : "cannot rest on the floor stably: held by 3 pins";
   }

@@ -41,8 +41,10 @@ struct Part {
   /// determinate: 3 + 2 + 1 displacement components, so the pins hold it without straining it).
   enum class Hold : uint8_t { kFloor, kFixed, kPins } hold = Hold::kPins;
   bool glued = false;                         ///< floor contacts also hold their tangent planes
-  int floor_points = 0, pins = 0;
+  int touching = 0;                           ///< contact points where it touches the floor
+  int floor_points = 0, pins = 0;             ///< held: at most kMaxFloorPoints of the contact points
   static constexpr int kFixedPart = 8;
+  static constexpr int kMaxFloorPoints = 16;
 };
 
 struct Stage {
