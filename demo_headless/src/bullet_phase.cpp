@@ -158,10 +158,24 @@ double round_mass(double kg) {
   return decade;
 }
 
+// The masses (1 : 5 : 20, the heaviest on the highest spot) from a probe of their weights.
+std::vector<double> box_masses(Context& c, const std::vector<int32_t>& spots, const std::string& phase) {
+  const std::vector<double> ratio = {1.0, 0.25, 0.05};
+  DeformationRequest probe;
+  for (size_t k = 0; k < spots.size(); ++k) {
+    probe.surface_forces.push_back(
+        {c.view->surface.vertex_points()[static_cast<size_t>(spots[k])], -ratio[k] * c.probe_force() * c.stage.up});
+  }
+  const double heaviest = round_mass(c.probe_force() * c.calibrate(probe, phase) / kGravity);
+  std::vector<double> masses;
+  for (size_t k = 0; k < spots.size(); ++k) masses.push_back(heaviest * ratio[k]);
+  return masses;
+}
+
 }  // namespace
 
 BulletPhaseResult run_bullet_world(const std::shared_ptr<Session>& session, const GeomId& id, const ControlMesh& mesh,
-                                   const BulletSetup& setup, const std::function<void(uint32_t)>& on_result) {
+                                   const BulletSetup& setup, const OnResult& on_result) {
   BulletPhaseResult out;
   btDefaultCollisionConfiguration configuration;
   btCollisionDispatcher dispatcher(&configuration);
@@ -197,12 +211,12 @@ BulletPhaseResult run_bullet_world(const std::shared_ptr<Session>& session, cons
     std::this_thread::sleep_until(loop_start + step * std::chrono::microseconds(4167));
     world.stepSimulation(1.0f / 60.0f, 1, 1.0f / 60.0f);
     out.contacts += bridge.update().contacts;
-    if (const uint32_t res_id = bridge.stats(shell).res_id; res_id != shown && on_result) on_result(shown = res_id);
+    if (const uint32_t res_id = bridge.stats(shell).res_id; res_id != shown) on_result(shown = res_id, bridge.control_positions(shell));
   }
   (void)bridge.wait_idle(std::chrono::seconds(10));
   bridge.update();
   const bullet::ShellStats stats = bridge.stats(shell);
-  if (stats.res_id != shown && on_result) on_result(stats.res_id);
+  if (stats.res_id != shown) on_result(stats.res_id, bridge.control_positions(shell));
   out.requests = static_cast<int>(stats.channel.sent);
   debug_counters(stats);
   out.res_id = stats.res_id;
@@ -234,27 +248,26 @@ void bullet_phase(Context& c) {
     c.report.notes.push_back("Bullet: no flat spot on top of the object for a box to rest on; no boxes dropped");
     return;
   }
-  // The masses (1 : 5 : 20, the heaviest on the highest spot) from a probe of their weights.
-  const std::vector<double> ratio = {1.0, 0.25, 0.05};
-  DeformationRequest probe;
-  for (size_t k = 0; k < spots.size(); ++k) {
-    probe.surface_forces.push_back(
-        {c.view->surface.vertex_points()[static_cast<size_t>(spots[k])], -ratio[k] * c.probe_force() * c.stage.up});
-  }
-  const double heaviest = round_mass(c.probe_force() * c.calibrate(probe, phase) / kGravity);
-  for (size_t k = 0; k < spots.size(); ++k) {
-    setup.spots.push_back(c.view->rest_vertices[static_cast<size_t>(spots[k])]);
-    setup.masses.push_back(heaviest * ratio[k]);
-  }
+  for (int32_t spot : spots) setup.spots.push_back(c.view->rest_vertices[static_cast<size_t>(spot)]);
+  setup.masses = box_masses(c, spots, phase);
   c.report.loads.box_masses = setup.masses;
   setup.supports = c.stage.supports;
   setup.up = c.stage.up;
   setup.floor_height = c.stage.floor_height;
   setup.level = std::max(1, c.options.level - 1);
   setup.steps = c.options.short_script ? std::min(c.options.bullet_steps, 60) : c.options.bullet_steps;
-  c.say("dropping " + std::to_string(spots.size()) + " boxes on the object (Bullet)");
-  const BulletPhaseResult world = run_bullet_world(c.session, c.id, c.mesh, setup, [&](uint32_t id) { c.timeline.stored(id); });
+  c.say("dropping " + std::to_string(spots.size()) + (spots.size() == 1 ? " box" : " boxes") + " on the object (Bullet)");
   auto& r = c.report.bullet;
+  // Every result the bridge shows joins the range checks (the boxes land, bounce and settle).
+  const BulletPhaseResult world = run_bullet_world(c.session, c.id, c.mesh, setup, [&](uint32_t id, const std::vector<Vec3>& x) {
+    c.timeline.stored(id);
+    c.report.last_res_id = std::max(c.report.last_res_id, id);
+    c.view->show(x);
+    Response shape = measure_shape(c.view->surface, c.view->rest_vertices, c.view->rest_normals);
+    shape.res_id = id;
+    r.max_deflection = std::max(r.max_deflection, shape.displacement);
+    c.range.observe(phase, shape);
+  });
   r.ran = true;
   r.bodies = static_cast<int>(world.bodies.size());
   r.contacts = world.contacts;
@@ -263,11 +276,6 @@ void bullet_phase(Context& c) {
   if (world.positions.empty()) return;
   c.shown = world.positions;
   c.view->show(world.positions);
-  Response shape = measure_shape(c.view->surface, c.view->rest_vertices, c.view->rest_normals);
-  shape.res_id = world.res_id;
-  c.report.last_res_id = std::max(c.report.last_res_id, world.res_id);
-  r.max_deflection = shape.displacement;
-  c.range.observe(phase, shape);
   c.check_stresses(phase);
   Snapshot& s = c.snapshot("bullet.png", "Bullet");
   for (const auto& b : world.bodies) s.bodies.push_back({b.corners, b.mass, b.on_shell});

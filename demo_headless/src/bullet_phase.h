@@ -40,10 +40,12 @@ struct BulletPhaseResult {
   std::vector<Body> bodies;
 };
 
-/// Runs the Bullet world on the shell `id` (uploaded from `mesh`). `on_result` is called with
-/// every result id the bridge shows.
+/// Every result the bridge shows: its id and control points.
+using OnResult = std::function<void(uint32_t res_id, const std::vector<Vec3>& positions)>;
+
+/// Runs the Bullet world on the shell `id` (uploaded from `mesh`).
 BulletPhaseResult run_bullet_world(const std::shared_ptr<Session>& session, const GeomId& id, const ControlMesh& mesh,
-                                   const BulletSetup& setup, const std::function<void(uint32_t)>& on_result);
+                                   const BulletSetup& setup, const OnResult& on_result);
 
 /// The phase in the script: picks flat spots on top, chooses masses that dent the shell inside
 /// the linear model's range (from a probe), runs the world, and records what happened.

@@ -2,7 +2,9 @@
 // mesh, honest about the linear model's range.
 #include "demo.h"
 
+#include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdlib>
@@ -211,6 +213,66 @@ TEST(DemoProgram, DetectsTheUpAxisAndTakesAnOverride) {
   ASSERT_EQ(forced.status, 0) << forced.err;
   EXPECT_EQ(forced.json["setup"]["up"], "x");
   EXPECT_FALSE(forced.json["setup"]["up_detected"].get<bool>());
+}
+
+// A softshell-server on a free port, for as long as the object lives.
+class ServerProcess {
+ public:
+  ServerProcess() {
+    int out[2];
+    if (pipe(out) != 0) throw std::runtime_error("pipe failed");
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(out[1], 1);
+      close(out[0]);
+      execl(SOFTSHELL_SERVER_EXE, SOFTSHELL_SERVER_EXE, "--port=0", "--log-level=warning", static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    close(out[1]);
+    std::string line;
+    char c = 0;
+    while (read(out[0], &c, 1) == 1 && c != '\n') line += c;
+    close(out[0]);
+    url_ = line.find("http://") == std::string::npos ? line : line.substr(line.find("http://"));
+  }
+  ~ServerProcess() {
+    kill(pid_, SIGTERM);
+    waitpid(pid_, nullptr, 0);
+  }
+  const std::string& url() const { return url_; }
+
+ private:
+  pid_t pid_ = -1;
+  std::string url_;
+};
+
+// --server: the same session against a separate server. Its stresses come from the server if it
+// offers them, and the report says so if it does not; the second run finds the geometry there
+// already and says that nothing was precomputed.
+TEST(DemoProgram, AgainstARunningServer) {
+  ServerProcess server;
+  ASSERT_EQ(server.url().rfind("http://127.0.0.1:", 0), 0u) << server.url();
+  const std::string args = "--server " + server.url() + " --short --level 1 --no-pictures --json --quiet --out '" +
+                           ::testing::TempDir() + "/softshell-demo-remote'";
+  const ProgramRun first = run_program(args, "remote-1");
+  ASSERT_EQ(first.status, 0) << first.err << first.out;
+  EXPECT_EQ(first.json["server"], "remote");
+  EXPECT_TRUE(first.json["precomputed_now"].get<bool>());
+  const auto& vm = first.json["final"]["max_von_mises"];
+  if (vm.is_null()) {
+    EXPECT_NE(first.json["notes"].dump().find("stresses are unavailable"), std::string::npos) << first.json["notes"].dump();
+  } else {
+    EXPECT_TRUE(std::isfinite(vm.get<double>()));
+  }
+  EXPECT_TRUE(first.json["warnings"].empty()) << first.json["warnings"].dump();
+
+  const ProgramRun second = run_program(args, "remote-2");
+  ASSERT_EQ(second.status, 0) << second.err;
+  EXPECT_FALSE(second.json["precomputed_now"].get<bool>());
+  EXPECT_TRUE(second.json["precompute_ms"].is_null());
+  EXPECT_NE(second.out.find("precompute           none: the server already held this geometry"), std::string::npos)
+      << second.out;
+  EXPECT_EQ(second.out.find("paper Table 1"), std::string::npos);
 }
 
 TEST(DemoProgram, OptionsVersionAndMessages) {
