@@ -27,7 +27,9 @@ constexpr const char* kDescription =
     "Options take their value as --opt value or --opt=value.\n";
 
 constexpr const char* kFooter =
-    "Environment: SOFTSHELL_DEMO_DEBUG=1 prints the Bullet bridge's request counters on stderr.\n";
+    "Environment: SOFTSHELL_SERVER is --server's default; SOFTSHELL_DEMO_DEBUG=1 prints on stderr\n"
+    "how the script adapted (rest analysis, pins, reach, probes, boxes) and the Bullet bridge's\n"
+    "request counters.\n";
 
 struct Args {
   softshell::demo::DemoOptions demo;
