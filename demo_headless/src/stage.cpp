@@ -342,17 +342,20 @@ void View::show(const std::vector<Vec3>& positions) {
 int32_t Stage::extreme(const std::vector<Vec3>& rest, const Vec3& direction, double band_lo, double band_hi) const {
   const Part& main = parts[static_cast<size_t>(main_part)];
   const double low = main.lo.dot(up), span = main.hi.dot(up) - low;
+  const bool flat = span <= 1e-6 * size;
   int32_t best = -1;
   double best_value = -std::numeric_limits<double>::infinity();
   for (size_t i = 0; i < rest.size(); ++i) {
     if (!reachable[i]) continue;
-    const double h = span > 0.0 ? (rest[i].dot(up) - low) / span : 0.5;
+    const double h = flat ? 0.5 : (rest[i].dot(up) - low) / span;
     if (h < band_lo - 1e-9 || h > band_hi + 1e-9) continue;
     if (rest[i].dot(direction) > best_value) {
       best_value = rest[i].dot(direction);
       best = static_cast<int32_t>(i);
     }
   }
+  // Nothing at those heights (a part of odd shape): anywhere the hand can reach.
+  if (best < 0 && (band_lo > 0.0 || band_hi < 1.0)) return extreme(rest, direction, 0.0, 1.0);
   return best;
 }
 
@@ -407,6 +410,12 @@ Stage adapt_to_object(const ControlMesh& mesh, const View& view, std::optional<i
                                                                (a.control_points == b.control_points && a.area < b.area);
                                                       }) -
                                      stage.parts.begin());
+  // Supports take at least six of its displacement components, a turning hand nine more.
+  if (const int n = stage.parts[static_cast<size_t>(stage.main_part)].control_points; n < Part::kMinHandled) {
+    fail(ErrorCode::kUnprocessable, "the mesh is too coarse for the scripted hands: its largest part has only " +
+                                        std::to_string(n) + " control points, and holding it and turning a point of it takes " +
+                                        std::to_string(Part::kMinHandled) + " (subdivide it once, e.g. in Blender, and try again)");
+  }
   stage.lo = Vec3::Constant(std::numeric_limits<double>::infinity());
   stage.hi = -stage.lo;
   for (const Vec3& p : view.rest_vertices) {

@@ -44,6 +44,7 @@ struct Part {
   int touching = 0;                           ///< contact points where it touches the floor
   int floor_points = 0, pins = 0;             ///< held: at most kMaxFloorPoints of the contact points
   static constexpr int kFixedPart = 8;
+  static constexpr int kMinHandled = 8;       ///< control points the part the hands hold needs
   static constexpr int kMaxFloorPoints = 16;
 };
 
@@ -77,6 +78,7 @@ struct Stage {
 };
 
 /// Adapts the script to `view`'s object at rest. `up_axis` forces the up axis (0, 1, 2).
+/// kUnprocessable if no part is fine enough for the hands (fewer than Part::kMinHandled control points).
 Stage adapt_to_object(const ControlMesh& mesh, const View& view, std::optional<int> up_axis);
 
 }  // namespace softshell::demo

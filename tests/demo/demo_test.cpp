@@ -121,6 +121,14 @@ TEST(Demo, BadInputIsAnErrorNotACrash) {
   report = run_demo(options);
   ASSERT_FALSE(report.ok());
   EXPECT_NE(report.error().message.find("is a directory"), std::string::npos) << report.error().message;
+  // A single quad: too coarse to hold and turn a point of; refused up front, saying what to do.
+  const auto quad = std::filesystem::path(::testing::TempDir()) / "softshell-demo-quad.obj";
+  std::ofstream(quad) << "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 4 3 2\n";
+  options.mesh = quad;
+  report = run_demo(options);
+  ASSERT_FALSE(report.ok());
+  EXPECT_EQ(report.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(report.error().message.find("subdivide it once"), std::string::npos) << report.error().message;
   options.mesh.clear();
   options.deformations = 3;
   EXPECT_EQ(run_demo(options).error().code, ErrorCode::kInvalidArgument);
