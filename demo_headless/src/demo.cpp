@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <thread>
 
 #include "bullet_phase.h"
@@ -23,10 +24,17 @@ double percentile(std::vector<double> v, double p) {
   return v[std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5))];
 }
 
+// The shipped mesh: beside the installed program (<bin>/../share/softshell/assets, wherever the
+// prefix was installed or moved to), else in the source tree the program was built from.
 std::filesystem::path default_mesh() {
-  for (const char* dir : {SOFTSHELL_ASSET_DIR, SOFTSHELL_INSTALLED_ASSET_DIR}) {
-    std::filesystem::path p = std::filesystem::path(dir) / "meshes" / "spot_control_mesh.obj";
-    if (std::filesystem::exists(p)) return p;
+  std::vector<std::filesystem::path> dirs;
+  std::error_code ec;
+  const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+  if (!ec) dirs.push_back(exe.parent_path() / SOFTSHELL_INSTALLED_ASSET_DIR_FROM_BIN);
+  dirs.emplace_back(SOFTSHELL_ASSET_DIR);
+  for (const auto& dir : dirs) {
+    std::filesystem::path p = dir / "meshes" / "spot_control_mesh.obj";
+    if (std::filesystem::exists(p, ec)) return p.lexically_normal();
   }
   return "assets/meshes/spot_control_mesh.obj";
 }
@@ -39,6 +47,7 @@ void load(Context& c) {
   c.mesh = read_obj(path, read).value();
   c.options.material.check().value();
   c.report.mesh = path.filename().string();
+  c.report.mesh_path = path.string();
   c.report.material = c.options.material_name;
   c.report.control_points = c.mesh.num_vertices();
   c.report.faces = c.mesh.num_faces();

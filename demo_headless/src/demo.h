@@ -39,6 +39,7 @@ struct DemoOptions {
 /// What the session did (the summary and the --json line).
 struct DemoReport {
   std::string mesh;
+  std::string mesh_path;                 ///< the file read (the default: beside the installed program, else the source tree)
   std::string material;
   std::string server;                    ///< "embedded" or "remote"
   int control_points = 0, faces = 0;

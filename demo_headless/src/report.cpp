@@ -89,6 +89,7 @@ std::string format_json(const DemoReport& r) {
   const auto& st = r.setup;
   nlohmann::json j = {
       {"mesh", r.mesh},
+      {"mesh_path", r.mesh_path},
       {"material", r.material},
       {"server", r.server},
       {"setup",

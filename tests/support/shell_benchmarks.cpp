@@ -4,20 +4,24 @@
 
 namespace softshell::test {
 
-Plate make_plate(int n, double a, bool ghost_ring) {
+Plate make_plate(int n, double a, bool ghost_ring) { return make_rectangle(n, n, a, a, ghost_ring); }
+
+Plate make_rectangle(int nx, int ny, double a, double b, bool ghost_ring) {
   Plate p;
-  p.n = n;
+  p.n = nx;
+  p.ny = ny;
   p.ghost = ghost_ring;
-  const int faces = n + (ghost_ring ? 2 : 0);
-  p.points_per_side = faces + 1;
-  const double h = a / n, origin = ghost_ring ? -h : 0.0;
+  const int ring = ghost_ring ? 2 : 0, faces_x = nx + ring, faces_y = ny + ring;
+  p.points_per_side = faces_x + 1;
+  const double hx = a / nx, hy = b / ny;
+  const double x0 = ghost_ring ? -hx : 0.0, y0 = ghost_ring ? -hy : 0.0;
   std::vector<Vec3> positions;
-  for (int j = 0; j <= faces; ++j) {
-    for (int i = 0; i <= faces; ++i) positions.emplace_back(origin + i * h, origin + j * h, 0.0);
+  for (int j = 0; j <= faces_y; ++j) {
+    for (int i = 0; i <= faces_x; ++i) positions.emplace_back(x0 + i * hx, y0 + j * hy, 0.0);
   }
   std::vector<std::vector<int32_t>> quads;
-  for (int j = 0; j < faces; ++j) {
-    for (int i = 0; i < faces; ++i) {
+  for (int j = 0; j < faces_y; ++j) {
+    for (int i = 0; i < faces_x; ++i) {
       quads.push_back({p.index(i, j), p.index(i + 1, j), p.index(i + 1, j + 1), p.index(i, j + 1)});
     }
   }
@@ -28,10 +32,10 @@ Plate make_plate(int n, double a, bool ghost_ring) {
 
 SurfacePoint Plate::at(double s, double t) const {
   const int offset = ghost ? 1 : 0;
-  const int faces = n + 2 * offset;
-  int fi = std::min(static_cast<int>(s * n), n - 1), fj = std::min(static_cast<int>(t * n), n - 1);
-  const double u = s * n - fi, v = t * n - fj;
-  return SurfacePoint{(fj + offset) * faces + fi + offset, 0, u, v};
+  const int faces_x = n + 2 * offset;
+  const int fi = std::min(static_cast<int>(s * n), n - 1), fj = std::min(static_cast<int>(t * ny), ny - 1);
+  const double u = s * n - fi, v = t * ny - fj;
+  return SurfacePoint{(fj + offset) * faces_x + fi + offset, 0, u, v};
 }
 
 SurfacePoint Plate::centre() const { return at(0.5, 0.5); }

@@ -10,21 +10,24 @@
 
 namespace softshell::test {
 
-/// Square plate [0, a]^2 in z = 0 with n x n faces. With `ghost_ring`, one more ring of faces
-/// lies outside the plate and the mesh uses BoundaryMode::kNone, so the interior faces are the
-/// plate (a full B-spline space up to the edges, for exact clamped conditions).
+/// Rectangular plate [0, a] x [0, b] in z = 0 with nx x ny faces (square: make_plate). With
+/// `ghost_ring`, one more ring of faces lies outside the plate and the mesh uses
+/// BoundaryMode::kNone, so the interior faces are the plate (a full B-spline space up to the
+/// edges, for exact clamped conditions and free edges).
 struct Plate {
   ControlMesh mesh;
-  int n = 0;           // faces per side of the physical plate
+  int n = 0;           // faces along x of the physical plate (per side for a square)
+  int ny = 0;          // faces along y
   bool ghost = false;
-  int points_per_side = 0;
+  int points_per_side = 0;  // control points per row (along x)
   int index(int i, int j) const { return j * points_per_side + i; }  // control point (i, j)
   /// The surface point at the plate's centre (n even).
   SurfacePoint centre() const;
-  /// The face and (u, v) of plate parameter (s, t) in [0, 1]^2.
+  /// The face and (u, v) of plate parameter (s, t) in [0, 1]^2 (u along x, v along y).
   SurfacePoint at(double s, double t) const;
 };
 Plate make_plate(int n, double a, bool ghost_ring = false);
+Plate make_rectangle(int nx, int ny, double a, double b, bool ghost_ring = false);
 
 /// Vertex constraints of a simply supported plate: w = 0 on the boundary row, in-plane DOFs fixed.
 std::vector<VertexConstraint> simply_supported(const Plate& plate);

@@ -13,6 +13,7 @@
 
 #include "kirchhoff_love.h"
 #include "quadrature.h"
+#include "zero_modes.h"
 #include "request_check.h"
 
 namespace softshell::engine {
@@ -23,6 +24,7 @@ namespace {
 struct Element {
   std::vector<int32_t> indices;              // control points (unique)
   Eigen::MatrixXd stiffness;                 // 3m x 3m
+  Eigen::MatrixXd gram;                      // m x m: sum over points of w_q N_A N_B (parameter weights)
   Eigen::VectorXd area_weights;              // m: integral of N_A dA
   Eigen::Matrix3Xd normal_weights;           // 3 x m: integral of N_A n dA
   std::vector<QuadraturePoint> points;       // its quadrature points (parameter weights)
@@ -135,6 +137,15 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
   out.stiffness.setZero(3 * m, 3 * m);
   out.stiffness.selfadjointView<Eigen::Lower>().rankUpdate(g.transpose());
   out.stiffness.triangularView<Eigen::StrictlyUpper>() = out.stiffness.transpose();
+  // The Gram matrix of the basis at the points, with the parameter weights: independent of the
+  // geometry, the material and the thickness (it finds the motions that leave the surface where it is).
+  Eigen::MatrixXd values(static_cast<Eigen::Index>(uvs.size()), m);
+  for (size_t q = 0; q < uvs.size(); ++q) {
+    values.row(static_cast<Eigen::Index>(q)) = std::sqrt(weights[q]) * basis.row(static_cast<Eigen::Index>(6 * q));
+  }
+  out.gram.setZero(m, m);
+  out.gram.selfadjointView<Eigen::Lower>().rankUpdate(values.transpose());
+  out.gram.triangularView<Eigen::StrictlyUpper>() = out.gram.transpose();
 }
 
 // Connected components by shared control points (union-find), then 6 rigid modes each.
@@ -188,74 +199,6 @@ void compute_rigid_modes(const ControlMesh& mesh, std::vector<int32_t>& componen
       axis[a] = 1.0;
       modes.block<3, 1>(row, col + 3 + a) = axis.cross(r);
     }
-  }
-}
-
-// Zero-energy modes beyond the rigid ones, on components small enough for a dense eigensolver.
-// Appends them to `modes` and says for each whether the limit surface moves.
-void find_extra_zero_modes(const ShellModel& model, const Eigen::SparseMatrix<double>& k,
-                           const std::vector<int32_t>& component_of, const Eigen::MatrixXd& rigid,
-                           Eigen::MatrixXd& modes, std::vector<bool>& invisible) {
-  constexpr Eigen::Index kMaxDofs = 600;
-  const int32_t components = static_cast<int32_t>(rigid.cols() / 6);
-  std::vector<std::vector<int32_t>> dofs(static_cast<size_t>(components));
-  for (size_t v = 0; v < component_of.size(); ++v) {
-    for (int a = 0; a < 3; ++a) dofs[static_cast<size_t>(component_of[v])].push_back(static_cast<int32_t>(3 * v) + a);
-  }
-  std::vector<Eigen::VectorXd> extra;
-  for (int32_t c = 0; c < components; ++c) {
-    const auto& d = dofs[static_cast<size_t>(c)];
-    const auto m = static_cast<Eigen::Index>(d.size());
-    if (m > kMaxDofs) continue;
-    Eigen::MatrixXd kc = Eigen::MatrixXd::Zero(m, m);
-    for (Eigen::Index j = 0; j < m; ++j) {
-      for (Eigen::SparseMatrix<double>::InnerIterator it(k, d[static_cast<size_t>(j)]); it; ++it) {
-        const auto i = std::lower_bound(d.begin(), d.end(), static_cast<int32_t>(it.row())) - d.begin();
-        if (i < m && d[static_cast<size_t>(i)] == it.row()) kc(i, j) = it.value();
-      }
-    }
-    // Eigenvalues first (a few times cheaper): almost every component has just its six rigid
-    // modes, and then the eigenvectors are not needed.
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(kc, Eigen::EigenvaluesOnly);
-    const double top = eig.eigenvalues().cwiseAbs().maxCoeff();
-    Eigen::Index zero = 0;
-    while (zero < m && eig.eigenvalues()[zero] < 1e-10 * top) ++zero;
-    if (zero <= 6) continue;
-    eig.compute(kc, Eigen::ComputeEigenvectors);
-    // The null space minus the rigid modes of this component.
-    Eigen::MatrixXd r(m, 6);
-    for (Eigen::Index i = 0; i < m; ++i) r.row(i) = rigid.block(d[static_cast<size_t>(i)], 6 * c, 1, 6);
-    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(r);
-    const Eigen::MatrixXd q = qr.householderQ() * Eigen::MatrixXd::Identity(m, 6);
-    Eigen::MatrixXd null = eig.eigenvectors().leftCols(zero);
-    null -= q * (q.transpose() * null);
-    Eigen::JacobiSVD<Eigen::MatrixXd> svd(null, Eigen::ComputeThinU);
-    for (Eigen::Index s = 0; s < svd.singularValues().size(); ++s) {
-      if (svd.singularValues()[s] < 1e-6) break;
-      Eigen::VectorXd v = Eigen::VectorXd::Zero(k.rows());
-      for (Eigen::Index i = 0; i < m; ++i) v[d[static_cast<size_t>(i)]] = svd.matrixU()(i, s);
-      extra.push_back(v);
-    }
-  }
-  modes = rigid;
-  if (extra.empty()) return;
-  modes.conservativeResize(Eigen::NoChange, rigid.cols() + static_cast<Eigen::Index>(extra.size()));
-  for (size_t e = 0; e < extra.size(); ++e) modes.col(rigid.cols() + static_cast<Eigen::Index>(e)) = extra[e];
-  // Invisible if the limit displacement vanishes at every quadrature point of its component.
-  LimitStencil st;
-  for (const Eigen::VectorXd& v : extra) {
-    Eigen::Index first = 0;
-    v.cwiseAbs().maxCoeff(&first);
-    const int32_t component = component_of[static_cast<size_t>(first / 3)];
-    double moved = 0.0;
-    for (const QuadraturePoint& q : model.quadrature()) {
-      if (component_of[static_cast<size_t>(model.mesh().face(q.point.face)[0])] != component) continue;
-      model.evaluator().stencil(q.point, st);
-      Vec3 u = Vec3::Zero();
-      for (size_t a = 0; a < st.size(); ++a) u += st.position[a] * v.segment<3>(3 * st.indices[a]);
-      moved = std::max(moved, u.norm());
-    }
-    invisible.push_back(moved < 1e-9);
   }
 }
 
@@ -348,6 +291,16 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
     }
   }
   std::fill(k.valuePtr(), k.valuePtr() + nnz, 0.0);
+  // The scalar Gram matrix of the basis (zero-mode analysis), on the control-point pattern.
+  Eigen::SparseMatrix<double> gram(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
+  {
+    std::vector<int> starts(n + 1, 0);
+    for (size_t b = 0; b < n; ++b) starts[b + 1] = starts[b] + static_cast<int>(neighbours[b].size());
+    gram.resizeNonZeros(starts.back());
+    std::copy(starts.begin(), starts.end(), gram.outerIndexPtr());
+    for (size_t b = 0; b < n; ++b) std::copy(neighbours[b].begin(), neighbours[b].end(), gram.innerIndexPtr() + starts[b]);
+    std::fill(gram.valuePtr(), gram.valuePtr() + starts.back(), 0.0);
+  }
 
   // Elements in fixed-size batches: computed in parallel, accumulated in face order, so K is
   // bit-for-bit the same for any number of threads.
@@ -379,6 +332,7 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
               column[ii] += e.stiffness(static_cast<Eigen::Index>(3 * al) + ii, static_cast<Eigen::Index>(3 * bl) + j);
             }
           }
+          gram.valuePtr()[gram.outerIndexPtr()[b] + rank] += e.gram(static_cast<Eigen::Index>(al), static_cast<Eigen::Index>(bl));
         }
         area_weights[b] += e.area_weights[static_cast<Eigen::Index>(bl)];
         normal_weights.segment<3>(3 * b) += e.normal_weights.col(static_cast<Eigen::Index>(bl));
@@ -394,7 +348,8 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
     }
   }
   compute_rigid_modes(mesh, model->component_of_, model->rigid_modes_);
-  find_extra_zero_modes(*model, k, model->component_of_, model->rigid_modes_, model->zero_modes_, model->invisible_);
+  internal::check_surface_connected(smooth, evaluator, model->component_of_);
+  internal::find_extra_zero_modes(gram, model->component_of_, model->rigid_modes_, model->zero_modes_, model->invisible_);
   for (Eigen::Index mode = 0; mode < model->zero_modes_.cols(); ++mode) {
     Eigen::Index dof = 0;
     model->zero_modes_.col(mode).cwiseAbs().maxCoeff(&dof);

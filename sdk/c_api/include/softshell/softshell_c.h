@@ -17,18 +17,27 @@
  *  - Arrays coming in are `(const T* in, int32_t count)`. Positions are double precision xyz
  *    triples; rendering outputs (tessellation vertices and normals) are float.
  *  - Bad input (NULL pointers, negative counts, indices out of range, NaN or infinite numbers, a
- *    handle of the wrong kind or already destroyed) is an error, never a crash. Handles carry a
- *    tag that is checked on every call; a destroyed handle is detected as long as its memory has
- *    not been reused, but using one is still a bug.
+ *    handle of the wrong kind or already destroyed) is an error, never a crash. Handles are
+ *    generation-checked ids (as Box2D's): a handle's value holds a slot of softshell's handle
+ *    table and that slot's generation, checked on every call, so a destroyed handle is always
+ *    detected (SS_INVALID_ARGUMENT, "... is a destroyed handle"), also after its slot was reused.
+ *    The value is never dereferenced: it is an opaque token of pointer size. Destroying a handle
+ *    twice releases nothing and logs a warning (ss_set_log_callback).
  *  - Units: the mesh's length unit (metres with SI materials); forces in N; E in Pa.
  *  - Thread-safety: a handle may be used by one thread at a time, except: functions taking a
  *    `const` handle (evaluate, pick, ...) may run concurrently on it as long as no non-const
  *    function runs on it at the same time; sessions and deformation operations are thread-safe.
+ *    A call in progress keeps its object alive even if another thread destroys the handle.
  *
  * Asynchronous deformation never blocks a game thread: `ss_session_deform_begin` returns an
  * operation at once; `ss_deformation_poll` says whether it is done; `ss_deformation_read` copies
  * the result out. Destroying an operation (or its session) while it runs is allowed and does not
- * block; the request completes in the background.
+ * block; the request completes in the background. Calls that ask a session something
+ * (`ss_session_geometry_status`, `ss_session_limit_comb`, upload) answer at once in-process and
+ * take one round trip on a remote session.
+ *
+ * Not yet in the C ABI: stresses (the C++ `Session::stresses`, softshell/stresses.h; planned here
+ * as `ss_session_stresses`) and a host task callback for the server's threads.
  */
 #ifndef SOFTSHELL_C_H
 #define SOFTSHELL_C_H
@@ -52,9 +61,22 @@ extern "C" {
 /* ---------------------------------------------------------------------------------------------
  * Version and status */
 
+/** softshell's version (the release this header belongs to). */
+#define SS_VERSION_MAJOR 0
+#define SS_VERSION_MINOR 1
+#define SS_VERSION_PATCH 0
+#define SS_VERSION_STRING "0.1.0"
+/** The version as one number, (major << 16) | (minor << 8) | patch, e.g. 0x000100 for 0.1.0. */
+#define SS_VERSION_NUMBER ((SS_VERSION_MAJOR << 16) | (SS_VERSION_MINOR << 8) | SS_VERSION_PATCH)
+/** The version of the loaded library, e.g. "0.1.0" (static storage). */
+SS_API const char* ss_version(void);
+/** The same as one number (SS_VERSION_NUMBER of the library's build). */
+SS_API uint32_t ss_version_number(void);
+
 /** The ABI version this header describes; compare with `ss_abi_version()` at load time and refuse
- *  a library with another one (struct layouts or signatures differ). */
-#define SS_ABI_VERSION 1u
+ *  a library with another one (struct layouts or signatures differ). 2: generation-checked
+ *  handles, blittable ss_embedded_options, geometry status, presets, limit_comb, log callback. */
+#define SS_ABI_VERSION 2u
 /** The ABI version of the loaded library. */
 SS_API uint32_t ss_abi_version(void);
 
@@ -79,6 +101,31 @@ typedef int32_t ss_status;
 SS_API const char* ss_last_error_message(void);
 /** Short stable name of a status, e.g. "invalid_argument". Never NULL; static storage. */
 SS_API const char* ss_status_name(ss_status status);
+
+/* ---------------------------------------------------------------------------------------------
+ * Log */
+
+#define SS_LOG_DEBUG 0
+#define SS_LOG_INFO 1
+#define SS_LOG_WARNING 2
+#define SS_LOG_ERROR 3
+#define SS_LOG_OFF 4
+
+/** Receives one message (UTF-8, no trailing newline, valid during the call only). Called from any
+ *  thread, softshell's own included, one call at a time; it must return quickly and must not call
+ *  back into softshell. */
+typedef void (*ss_log_callback)(int32_t level, const char* message, void* user_data);
+
+/** Installs the process-wide log callback (NULL: none, the default) with the lowest level it
+ *  receives (SS_LOG_*; SS_LOG_OFF silences it). What is logged: the in-process server's messages
+ *  (precomputations started, finished and failed, failed solves; with a listener, its requests),
+ *  handles destroyed twice, and the errors of operations destroyed before anybody read them.
+ *  Errors of calls are still returned as statuses; internal errors (bugs) are also logged. It
+ *  becomes the SDK's process-wide log sink (softshell/log.h, `set_log_sink`; it replaces a sink a
+ *  C++ host installed there). Takes effect at once, for every session; after it returns with
+ *  another callback (or NULL) the old one is not called again. SS_INVALID_ARGUMENT for a level
+ *  outside SS_LOG_DEBUG..SS_LOG_OFF. */
+SS_API ss_status ss_set_log_callback(ss_log_callback callback, void* user_data, int32_t min_level);
 
 /* ---------------------------------------------------------------------------------------------
  * Plain structs (no padding surprises: every field is 4 or 8 bytes, 8-byte fields 8-aligned) */
@@ -115,6 +162,21 @@ typedef struct ss_material {
   double thickness;
   double density;
 } ss_material;
+
+/** The built-in defaults (E 69 GPa, nu 0.33, t 1 mm, 2700 kg/m^3: aluminium). No-op for NULL. */
+SS_API void ss_material_default(ss_material* out);
+/** SS_OK if the material can be simulated; otherwise SS_UNPROCESSABLE naming the field and its
+ *  allowed range. */
+SS_API ss_status ss_material_check(const ss_material* material);
+/** The named preset (case-insensitive: "aluminium", "steel", "rubber", ...) with the given
+ *  thickness (m). An unknown name is SS_INVALID_ARGUMENT, the message lists the known ones. */
+SS_API ss_status ss_material_preset(const char* name, double thickness, ss_material* out_material);
+/** Number of presets (11). */
+SS_API int32_t ss_material_preset_count(void);
+/** Preset `index` (0..count-1): name and description (static storage), material (thickness 1 mm)
+ *  and the stress (Pa) above which the linear elastic model no longer holds. Outputs nullable. */
+SS_API ss_status ss_material_preset_at(int32_t index, const char** out_name, const char** out_description,
+                                       ss_material* out_material, double* out_yield_strength);
 
 /** Content-derived geometry id (16 bytes). */
 typedef struct ss_geom_id {
@@ -387,6 +449,32 @@ SS_API void ss_deformation_destroy(ss_deformation* operation);
 SS_API ss_status ss_session_latest_result(ss_session* session, const ss_geom_id* id, uint32_t have, int32_t wait_ms,
                                           int32_t* out_has_new, uint32_t* out_res_id, double* out_xyz,
                                           int32_t capacity, int32_t* out_count);
+
+#define SS_GEOMETRY_PRECOMPUTING 0  /* the server is assembling and factorizing its stiffness */
+#define SS_GEOMETRY_READY 1         /* deformations are solved at once */
+#define SS_GEOMETRY_FAILED 2        /* the precomputation failed; deformations return its error */
+
+/** What the server knows about a geometry. */
+typedef struct ss_geometry_status {
+  int32_t status;        /* SS_GEOMETRY_* */
+  int32_t num_vertices;
+  int32_t num_faces;
+  uint32_t num_results;  /* stored results */
+  double progress;       /* precomputation progress in [0, 1] (1 once ready) */
+} ss_geometry_status;
+
+/** Status and precomputation progress of an uploaded geometry, for a loading bar: poll it instead
+ *  of blocking in a deformation. `out_error` (nullable, `error_capacity` chars) receives why the
+ *  precomputation failed ("" otherwise), truncated to fit and NUL-terminated. SS_NOT_FOUND for an
+ *  unknown id. */
+SS_API ss_status ss_session_geometry_status(ss_session* session, const ss_geom_id* id, ss_geometry_status* out_status,
+                                            char* out_error, int32_t error_capacity);
+/** The limit point at `point` and its tangents as combinations of the control points, computed
+ *  by the server (`GET .../limit_comb`): indices and the weights of position, du and dv, as
+ *  `ss_evaluator_stencil` (the weight buffers may be NULL). */
+SS_API ss_status ss_session_limit_comb(ss_session* session, const ss_geom_id* id, const ss_surface_point* point,
+                                       int32_t* out_indices, double* out_position, double* out_du, double* out_dv,
+                                       int32_t capacity, int32_t* out_count);
 
 #ifdef __cplusplus
 }  /* extern "C" */

@@ -3,9 +3,9 @@
  * inside the calling process (no sockets unless asked for). Everything else about sessions is in
  * softshell_c.h; the conventions there apply.
  *
- * Declared by the SDK, implemented by the embedded server library (softshell::embedded), so a
- * program that uses it links that library as well. Unity / Unreal: load the embedded library's
- * shared object; it exports these symbols next to the SDK's.
+ * Implemented by the embedded server library (softshell::embedded), so a program that uses it
+ * links that library as well. Unity / Unreal: load libsoftshell_plugin (softshell::plugin), the
+ * one file with the whole C ABI, this part included.
  */
 #ifndef SOFTSHELL_EMBEDDED_C_H
 #define SOFTSHELL_EMBEDDED_C_H
@@ -26,15 +26,22 @@
 extern "C" {
 #endif
 
-/** Options of the in-process server. */
+/** Capacity of ss_embedded_options.http_host, the terminating NUL included. */
+#define SS_HOST_CAPACITY 64
+
+/** Options of the in-process server. Blittable: fixed-size plain fields only (80 bytes; C#
+ *  declares the host as `fixed byte http_host[64]`), so it crosses P/Invoke without marshalling. */
 typedef struct ss_embedded_options {
   int32_t worker_threads;  /* precomputation / solve threads; 0: the number of cores */
   int32_t cache_mb;        /* memory budget of cached factorizations in MiB; 0: the server default */
-  const char* http_host;   /* NULL: no HTTP listener; else also serve PROTOCOL.md on this address */
-  int32_t http_port;       /* port of the listener; 0: any free port */
+  int32_t listen;          /* != 0: also serve PROTOCOL.md over HTTP on http_host:http_port */
+  int32_t http_port;       /* port of the listener; 0: any free port (ss_session_embedded_port) */
+  char http_host[SS_HOST_CAPACITY]; /* NUL-terminated address to listen on; default "127.0.0.1",
+                                       "0.0.0.0" for every interface */
 } ss_embedded_options;
 
-/** Writes the defaults (no listener, server defaults) into `*out` (no-op for NULL). */
+/** Writes the defaults (no listener, server defaults, host "127.0.0.1") into `*out` (no-op for
+ *  NULL). */
 SS_EMBEDDED_API void ss_embedded_options_default(ss_embedded_options* out);
 
 /** Starts an in-process server and returns a session on it (`options` NULL: defaults). Destroy it

@@ -91,13 +91,19 @@ class ShellModel {
   /// (scaled by 1 / its size). K times any of them is zero up to round-off.
   const Eigen::MatrixXd& rigid_modes() const { return rigid_modes_; }
   /// Every zero-energy mode: the rigid modes (first 6c columns) followed by the extra modes of
-  /// the control mesh found on components of at most 600 DOFs (for example the checkerboard
-  /// pattern of a cube whose vertices all have valence 3, which Catmull-Clark maps to zero).
-  /// Orthonormal within each component; K times each is zero up to round-off.
+  /// the control mesh: displacements that leave a part's limit surface where it is (for example
+  /// the checkerboard pattern of a cube whose vertices all have valence 3, which Catmull-Clark
+  /// maps to zero). Found for every part on the Gram matrix of the basis at the quadrature
+  /// points, so they depend neither on the thickness nor on the material (a thin shell's bending
+  /// modes are never taken for zero modes). Extra modes are orthonormal within each component and
+  /// orthogonal to its rigid modes; K times each mode is zero up to round-off. `build` refuses a
+  /// part whose limit surface falls apart into pieces (possible with ghost faces), whose pieces
+  /// could move against each other without strain.
   const Eigen::MatrixXd& zero_energy_modes() const { return zero_modes_; }
   int32_t num_rigid_modes() const { return static_cast<int32_t>(rigid_modes_.cols()); }
   /// For each extra mode (column num_rigid_modes() + k): true if it leaves the limit surface where
-  /// it is (the solver then fixes its amplitude to zero when nothing else does).
+  /// it is (the solver then fixes its amplitude to zero when nothing else does). True for every
+  /// extra mode, by construction.
   const std::vector<bool>& invisible_modes() const { return invisible_; }
   /// The connected component each zero-energy mode (column of zero_energy_modes()) lives on.
   const std::vector<int32_t>& zero_energy_mode_component() const { return mode_component_; }
