@@ -258,12 +258,15 @@ void bullet_phase(Context& c) {
   setup.steps = c.options.short_script ? std::min(c.options.bullet_steps, 60) : c.options.bullet_steps;
   c.say("dropping " + std::to_string(spots.size()) + (spots.size() == 1 ? " box" : " boxes") + " on the object (Bullet)");
   auto& r = c.report.bullet;
-  // Every result the bridge shows joins the range checks (the boxes land, bounce and settle).
+  // Every result the bridge shows joins the range checks (the boxes land, bounce and settle),
+  // measured on a level-1 tessellation so that the physics loop keeps its pace.
+  Tessellation coarse = Tessellation::create(c.view->evaluator, 1).value();
+  const std::vector<Vec3> coarse_rest = coarse.vertices(), coarse_normals = coarse.normals();
   const BulletPhaseResult world = run_bullet_world(c.session, c.id, c.mesh, setup, [&](uint32_t id, const std::vector<Vec3>& x) {
     c.timeline.stored(id);
     c.report.last_res_id = std::max(c.report.last_res_id, id);
-    c.view->show(x);
-    Response shape = measure_shape(c.view->surface, c.view->rest_vertices, c.view->rest_normals);
+    coarse.update(x);
+    Response shape = measure_shape(coarse, coarse_rest, coarse_normals);
     shape.res_id = id;
     r.max_deflection = std::max(r.max_deflection, shape.displacement);
     c.range.observe(phase, shape);
@@ -276,6 +279,10 @@ void bullet_phase(Context& c) {
   if (world.positions.empty()) return;
   c.shown = world.positions;
   c.view->show(world.positions);
+  Response last = measure_shape(c.view->surface, c.view->rest_vertices, c.view->rest_normals);
+  last.res_id = world.res_id;
+  c.range.observe(phase, last);  // the resting state at full resolution
+  r.max_deflection = std::max(r.max_deflection, last.displacement);
   c.check_stresses(phase);
   Snapshot& s = c.snapshot("bullet.png", "Bullet");
   for (const auto& b : world.bodies) s.bodies.push_back({b.corners, b.mass, b.on_shell});
