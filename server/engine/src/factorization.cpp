@@ -64,8 +64,20 @@ std::unique_lock<std::mutex> blas_turn() {
 
 Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned)
     : fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
+  factorize(model.stiffness(), nullptr);
+}
+
+Factorization::Factorization(const Eigen::SparseMatrix<double>& k, std::vector<int32_t> fixed,
+                             std::vector<int32_t> pinned, const Factorization* same_pattern)
+    : fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
+  if (same_pattern && (same_pattern->fixed_ != fixed_ || same_pattern->pinned_ != pinned_ || !same_pattern->factor_)) {
+    same_pattern = nullptr;
+  }
+  factorize(k, same_pattern);
+}
+
+void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern) {
   const auto start = std::chrono::steady_clock::now();
-  const Eigen::SparseMatrix<double>& k = model.stiffness();
   const auto n = static_cast<size_t>(k.rows());
   position_.assign(n, -1);
   std::vector<char> excluded(n, 0);
@@ -112,7 +124,10 @@ Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed
   bool ok = false;
   {
     const auto turn = blas_turn();
-    l = cholmod_analyze(a, c);
+    // A copy of a factor of the same pattern carries its ordering and supernodes: factorizing
+    // into it skips the analysis (the larger share of a small model's factorization).
+    l = same_pattern ? cholmod_copy_factor(reinterpret_cast<cholmod_factor*>(same_pattern->factor_), c)
+                     : cholmod_analyze(a, c);
     ok = l && cholmod_factorize(a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
   }
   const size_t minor = l ? l->minor : 0;

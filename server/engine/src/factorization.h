@@ -32,6 +32,11 @@ class Factorization {
   /// Factorizes K restricted to the DOFs neither fixed nor pinned. Throws
   /// Exception(kUnprocessable) if that matrix is not positive definite.
   Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned);
+  /// The same for another symmetric matrix with K's sparsity pattern (full, both triangles; e.g.
+  /// a tangent stiffness). With `same_pattern` (a factor of a matrix with this pattern and the same
+  /// fixed and pinned DOFs) its symbolic analysis is reused: only the numeric factorization runs.
+  Factorization(const Eigen::SparseMatrix<double>& k, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
+                const Factorization* same_pattern = nullptr);
   ~Factorization();
   Factorization(const Factorization&) = delete;
   Factorization& operator=(const Factorization&) = delete;
@@ -57,6 +62,7 @@ class Factorization {
   Eigen::MatrixXd backward(const Eigen::MatrixXd& y) const;
 
  private:
+  void factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern);
   Eigen::MatrixXd apply(int system, const Eigen::MatrixXd& rhs) const;
   // The forward sweep over the supernodes reachable from the nonzero rows of P B, if that is at
   // most half of the factor; false (and `x` untouched) otherwise.

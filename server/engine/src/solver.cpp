@@ -8,6 +8,7 @@
 #include <Eigen/Dense>
 #include <Eigen/SparseLU>
 
+#include "constraint_rows.h"
 #include "factor_cache_impl.h"
 #include "factorization.h"
 #include "request_check.h"
@@ -44,22 +45,10 @@ std::string format_vec(Vec3 v) {
   return s.str();
 }
 
-// One scalar linear equation sum coef * u[dof] = rhs, from a Lagrange, limit or vertex constraint.
-struct Row {
-  std::vector<std::pair<int32_t, double>> terms;  // sorted by DOF, unique
-  double rhs = 0.0;
-  double scale = 0.0;  // magnitude of the equation's terms, for tolerances
-  std::string source;  // for messages, e.g. "limit constraint 2 (y)"
-};
+}  // namespace
 
-// A request turned into linear algebra: prescribed DOFs, constraint rows and the load vector.
-struct Problem {
-  std::vector<int32_t> fixed;        // sorted DOFs
-  Eigen::VectorXd fixed_value;       // 3n, meaningful on fixed DOFs
-  std::vector<char> is_fixed;        // 3n
-  std::vector<Row> rows;             // with fixed DOFs moved to the right-hand side
-  Eigen::VectorXd load;              // 3n
-};
+// The request-to-rows part is shared with the nonlinear solver (constraint_rows.h).
+namespace internal {
 
 void add_row(Row row, std::vector<Row>& rows) {
   std::sort(row.terms.begin(), row.terms.end());
@@ -349,31 +338,6 @@ std::vector<int32_t> choose_pins(const ShellModel& model, const std::vector<int3
   return pins;
 }
 
-// The small dense symmetric system of the Schur complement, decomposed once and solved for
-// several right-hand sides (iterative refinement): symmetric diagonal scaling, then a complete
-// orthogonal decomposition (minimum-norm solution when redundant constraints make it singular).
-class SmallSystem {
- public:
-  explicit SmallSystem(const Eigen::MatrixXd& s) : scale_(s.rows()) {
-    for (Eigen::Index i = 0; i < s.rows(); ++i) {
-      const double diag = std::abs(s(i, i));
-      const double mag = diag > 0.0 ? diag : s.row(i).cwiseAbs().maxCoeff();
-      scale_[i] = mag > 0.0 ? 1.0 / std::sqrt(mag) : 1.0;
-    }
-    if (s.rows() == 0) return;
-    cod_.setThreshold(1e-11);
-    cod_.compute(scale_.asDiagonal() * s * scale_.asDiagonal());
-  }
-  Eigen::VectorXd solve(const Eigen::VectorXd& r) const {
-    if (r.size() == 0) return Eigen::VectorXd();
-    return scale_.asDiagonal() * cod_.solve(scale_.asDiagonal() * r);
-  }
-
- private:
-  Eigen::VectorXd scale_;
-  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod_;
-};
-
 // Checks that the solution meets every row and is finite; kUnprocessable otherwise.
 void check_solution(const Problem& p, const Eigen::VectorXd& u, double length) {
   if (!u.allFinite()) {
@@ -392,7 +356,15 @@ void check_solution(const Problem& p, const Eigen::VectorXd& u, double length) {
   }
 }
 
-}  // namespace
+}  // namespace internal
+
+using internal::build_problem;
+using internal::check_determined;
+using internal::check_solution;
+using internal::choose_pins;
+using internal::Problem;
+using internal::Row;
+using internal::SmallSystem;
 
 std::vector<Vec3> Solution::positions(const ControlMesh& mesh) const {
   std::vector<Vec3> out = mesh.positions();

@@ -1,0 +1,90 @@
+#pragma once
+// The geometrically nonlinear Kirchhoff-Love shell (private to the engine): total Lagrangian,
+// exact Green-Lagrange membrane strains and the exact change of curvature of the deformed limit
+// surface (Kiendl et al. 2009/2015), St. Venant-Kirchhoff material.
+//
+// Same quadrature points and weights, basis and material matrices as the linear model
+// (kirchhoff_love.h), so its first-order term is K: at u = 0 the internal forces vanish and the
+// tangent is K to round-off. The basis (N and its first and second derivatives) is evaluated once
+// per model and kept here; a solve only recomputes the deformed frames.
+//
+// Per quadrature point, with A_a the reference tangents, a_a = A_a + u,a the deformed ones,
+// n the deformed unit normal:
+//   membrane strain  e = [1/2 (a1.a1 - A1.A1), 1/2 (a2.a2 - A2.A2), a1.a2 - A1.A2]
+//   curvature change k = [B11 - b11, B22 - b22, 2 (B12 - b12)],   b_ab = a_a,b . n
+//   energy density   1/2 e^T (t C) e + 1/2 k^T (t^3/12 C) k,  C the reference contravariant matrix
+// Strains are computed from u,a and the reference frame without subtracting large numbers, so
+// small deformations keep their relative accuracy.
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include "softshell/engine/shell_model.h"
+
+namespace softshell::engine::internal {
+
+/// The deformed state of the shell at a displacement: per-point frames and stress resultants
+/// (what tangent products need), strain energy and internal forces.
+struct ShellState {
+  Eigen::VectorXd displacement;    ///< 3n
+  bool valid = false;              ///< false: some area element is zero, inverted or not finite
+  double energy = 0.0;             ///< strain energy (J)
+  Eigen::VectorXd internal_force;  ///< 3n: f_int = dW/du (N)
+  /// 3n: the follower pressure force per unit pressure, integral of N_A n da over the deformed
+  /// surface (zero-sized unless asked for).
+  Eigen::VectorXd pressure_force;
+  std::vector<double> points;      ///< per quadrature point, kPointState doubles (see .cpp)
+};
+
+class NonlinearShell {
+ public:
+  /// Evaluates the basis at every quadrature point of `model` (the points and weights its K was
+  /// integrated with). `threads`: 0 = hardware concurrency.
+  static std::shared_ptr<const NonlinearShell> build(std::shared_ptr<const ShellModel> model, int threads = 0);
+
+  const ShellModel& model() const { return *model_; }
+  int32_t num_dofs() const { return model_->num_dofs(); }
+  size_t num_points() const { return num_points_; }
+  size_t memory_bytes() const;
+
+  /// Worker threads for the per-element work (0 = hardware concurrency); small models use one.
+  void set_threads(int threads) { threads_ = threads; }
+
+  /// Evaluates the state at displacement `u` (3n). `with_pressure`: also the follower pressure
+  /// force. Returns state.valid.
+  bool evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const;
+
+  /// out = (K_T(u) - pressure K_p(u)) v for the columns of v (3n x k): the derivative of
+  /// f_int - pressure * f_p at the state (K_p: the load stiffness of the follower pressure).
+  void tangent_product(const ShellState& state, double pressure, const Eigen::MatrixXd& v, Eigen::MatrixXd& out) const;
+
+  /// The assembled tangent K_T(u) - pressure sym(K_p(u)) on the sparsity pattern of the model's
+  /// K (full symmetric, CSC). The load stiffness of a pressure is not symmetric on an open
+  /// surface; its symmetric part is what a Cholesky factor can take.
+  void assemble_tangent(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
+
+ private:
+  struct Element {
+    std::vector<int32_t> indices;  // m control points
+    Eigen::MatrixXd basis;         // 6P x m: row d P + q is derivative d (N, ,u, ,v, ,uu, ,uv, ,vv) at point q
+    size_t first_point = 0;        // into the per-point arrays
+    Eigen::Index points = 0;       // P
+    std::vector<int32_t> offsets;  // m x m: 3 * rank of control point a among b's neighbours in K
+  };
+  NonlinearShell() = default;
+
+  template <class Fn>
+  void for_each_element(Fn&& fn) const;
+
+  std::shared_ptr<const ShellModel> model_;
+  std::vector<Element> elements_;
+  std::vector<double> reference_;  // per point, kPointReference doubles (see .cpp)
+  size_t num_points_ = 0;
+  int threads_ = 0;
+};
+
+}  // namespace softshell::engine::internal
