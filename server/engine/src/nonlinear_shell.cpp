@@ -8,6 +8,7 @@
 
 #include "kirchhoff_love.h"
 #include "parallel.h"
+#include "quadrature.h"
 
 namespace softshell::engine::internal {
 namespace {
@@ -40,12 +41,14 @@ V3 sym_mul(const double* s, const V3& x) {
 // Internal force coefficients of one point: f_A = sum_d N_A,d c[d] (c[0]: the pressure force per
 // unit pressure, w (a1 x a2), when asked for). d = displacement derivatives u,u u,v u,uu u,uv u,vv.
 // Returns false for a degenerate point.
-bool point_forces(const double* ref, const V3* d, bool pressure, double* state, V3* c, double& energy) {
+bool point_forces(const double* ref, const V3* d, bool pressure, double* state, V3* c, double& energy,
+                  double& gradient) {
   const V3 A1 = load3(ref), A2 = load3(ref + 3), A11 = load3(ref + 6), A12 = load3(ref + 9), A22 = load3(ref + 12);
   const V3 T3 = load3(ref + 15), N0 = load3(ref + 19);
   const double J = ref[18];
   const V3 &d1 = d[0], &d2 = d[1], &d11 = d[2], &d12 = d[3], &d22 = d[4];
   const V3 a1 = A1 + d1, a2 = A2 + d2, a11 = A11 + d11, a12 = A12 + d12, a22 = A22 + d22;
+  gradient = std::max({gradient, d1.norm() / A1.norm(), d2.norm() / A2.norm()});
   // Green-Lagrange strains [E11, E22, 2 E12] without forming a.a - A.A.
   const V3 e(A1.dot(d1) + 0.5 * d1.squaredNorm(), A2.dot(d2) + 0.5 * d2.squaredNorm(),
              A1.dot(d2) + d1.dot(A2) + d1.dot(d2));
@@ -109,69 +112,78 @@ void point_tangent(const double* ref, const double* state, double pressure, cons
   c[5] = -(dmm[1] * n + mm[1] * dn);
 }
 
+// D (rows x 3, column-major) = W.middleRows(first, rows) * U (m x 3): one pass over the basis
+// (Eigen's GEMM would repack the whole basis for every call).
+void basis_times(const Eigen::MatrixXd& w, Eigen::Index first, Eigen::Index rows, const double* u, Eigen::Index m,
+                 double* d) {
+  Eigen::Map<Eigen::MatrixX3d> out(d, rows, 3);
+  out.setZero();
+  for (Eigen::Index a = 0; a < m; ++a) {
+    const auto col = w.col(a).segment(first, rows);
+    out.col(0).noalias() += u[a] * col;
+    out.col(1).noalias() += u[m + a] * col;
+    out.col(2).noalias() += u[2 * m + a] * col;
+  }
+}
+
+// F (m x 3, column-major) += W.middleRows(first, rows)^T * C (rows x 3, columns `c_stride` apart).
+void basis_transpose_times(const Eigen::MatrixXd& w, Eigen::Index first, Eigen::Index rows, const double* c,
+                           Eigen::Index c_stride, Eigen::Index m, double* f) {
+  const Eigen::Map<const Eigen::VectorXd> c0(c, rows), c1(c + c_stride, rows), c2(c + 2 * c_stride, rows);
+  for (Eigen::Index a = 0; a < m; ++a) {
+    const auto col = w.col(a).segment(first, rows);
+    f[a] += col.dot(c0);
+    f[m + a] += col.dot(c1);
+    f[2 * m + a] += col.dot(c2);
+  }
+}
+
 }  // namespace
 
 template <class Fn>
-void NonlinearShell::for_each_element(Fn&& fn) const {
+void NonlinearShell::for_each_element(const Rule& rule, Fn&& fn) const {
   // Chunks of about the same number of points, so both threads finish together.
   constexpr size_t kPointsPerChunk = 4096;
-  const int threads = num_points_ < 2 * kPointsPerChunk ? 1 : resolve_threads(threads_);
+  const int threads = rule.points < 2 * kPointsPerChunk ? 1 : resolve_threads(threads_);
   if (threads == 1) {
-    for (size_t e = 0; e < elements_.size(); ++e) fn(e);
+    for (size_t e = 0; e < rule.elements.size(); ++e) fn(e);
     return;
   }
   std::vector<size_t> starts{0};
   size_t points = 0;
-  for (size_t e = 0; e < elements_.size(); ++e) {
-    points += static_cast<size_t>(elements_[e].points);
+  for (size_t e = 0; e < rule.elements.size(); ++e) {
+    points += static_cast<size_t>(rule.elements[e].points);
     if (points >= kPointsPerChunk) {
       starts.push_back(e + 1);
       points = 0;
     }
   }
-  if (starts.back() != elements_.size()) starts.push_back(elements_.size());
+  if (starts.back() != rule.elements.size()) starts.push_back(rule.elements.size());
   parallel_for(0, static_cast<int64_t>(starts.size() - 1), threads, [&](int64_t c) {
     for (size_t e = starts[static_cast<size_t>(c)]; e < starts[static_cast<size_t>(c) + 1]; ++e) fn(e);
   });
 }
 
-std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<const ShellModel> model, int threads) {
-  if (!model) fail(ErrorCode::kInvalidArgument, "NonlinearShell needs a model");
-  std::shared_ptr<NonlinearShell> shell(new NonlinearShell());
-  shell->model_ = model;
-  shell->threads_ = threads;
-  const ShellModel& m = *model;
-  // Elements: the runs of quadrature points on one (face, sub-face), in the order K was built.
-  const std::vector<QuadraturePoint>& quad = m.quadrature();
-  for (size_t q = 0; q < quad.size();) {
-    size_t end = q + 1;
-    while (end < quad.size() && quad[end].point.face == quad[q].point.face &&
-           quad[end].point.subface == quad[q].point.subface) {
-      ++end;
-    }
-    Element e;
-    e.first_point = q;
-    e.points = static_cast<Eigen::Index>(end - q);
-    shell->elements_.push_back(std::move(e));
-    q = end;
+void NonlinearShell::build_rule(const std::vector<Cell>& cells, int threads, Rule& rule) const {
+  const ShellModel& m = *model_;
+  rule.elements.resize(cells.size());
+  size_t points = 0;
+  for (size_t c = 0; c < cells.size(); ++c) {
+    rule.elements[c].first_point = points;
+    rule.elements[c].points = static_cast<Eigen::Index>(cells[c].uvs.size());
+    points += cells[c].uvs.size();
   }
-  shell->num_points_ = quad.size();
-  shell->reference_.assign(kRef * quad.size(), 0.0);
-
+  rule.points = points;
+  rule.reference.assign(kRef * points, 0.0);
   const Eigen::SparseMatrix<double>& k = m.stiffness();
   const Material& mat = m.material();
   const double t = mat.thickness;
-  parallel_for(0, static_cast<int64_t>(shell->elements_.size()), resolve_threads(threads), [&](int64_t ei) {
-    Element& e = shell->elements_[static_cast<size_t>(ei)];
+  parallel_for(0, static_cast<int64_t>(cells.size()), resolve_threads(threads), [&](int64_t ci) {
+    const Cell& cell = cells[static_cast<size_t>(ci)];
+    Element& e = rule.elements[static_cast<size_t>(ci)];
     const auto p = e.points;
-    std::vector<std::array<double, 2>> uvs(static_cast<size_t>(p));
-    for (Eigen::Index q = 0; q < p; ++q) {
-      const QuadraturePoint& qp = quad[e.first_point + static_cast<size_t>(q)];
-      uvs[static_cast<size_t>(q)] = {qp.point.u, qp.point.v};
-    }
     Eigen::MatrixXd bfr;  // 6P x m, rows 6q + d
-    const SurfacePoint& first = quad[e.first_point].point;
-    m.evaluator().face_stencils(first.face, first.subface, uvs, e.indices, bfr);
+    m.evaluator().face_stencils(cell.face, cell.subface, cell.uvs, e.indices, bfr);
     const auto mm = static_cast<Eigen::Index>(e.indices.size());
     e.basis.resize(kRows * p, mm);
     for (Eigen::Index q = 0; q < p; ++q) {
@@ -186,23 +198,24 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
     for (Eigen::Index q = 0; q < p; ++q) {
       // The same frame and material matrix the linear model was integrated with.
       if (!compute_frame(bfr.middleRows(kRows * q, kRows), x, mat.youngs_modulus, mat.poisson_ratio, frame)) {
-        fail(ErrorCode::kInternal, "nonlinear shell: a degenerate quadrature point in a model that was built");
+        fail(ErrorCode::kUnprocessable, "nonlinear shell: the limit surface of face " + std::to_string(cell.face) +
+                                            " is degenerate at a quadrature point");
       }
-      const QuadraturePoint& qp = quad[e.first_point + static_cast<size_t>(q)];
-      double* ref = shell->reference_.data() + kRef * (e.first_point + static_cast<size_t>(q));
+      double* ref = rule.reference.data() + kRef * (e.first_point + static_cast<size_t>(q));
       for (int d = 1; d < kRows; ++d) store3(ref + 3 * (d - 1), deriv.row(d * p + q).transpose());
       const V3 t3 = load3(ref).cross(load3(ref + 3));
       store3(ref + 15, t3);
       ref[18] = t3.norm();
       store3(ref + 19, t3 / t3.norm());
-      const double da = qp.weight * frame.j;
+      const double weight = cell.weights[static_cast<size_t>(q)];
+      const double da = weight * frame.j;
       const Eigen::Matrix3d& c = frame.material;
       const double packed[6] = {c(0, 0), c(1, 1), c(2, 2), c(0, 1), c(0, 2), c(1, 2)};
       for (int i = 0; i < 6; ++i) {
         ref[22 + i] = da * t * packed[i];
         ref[28 + i] = da * t * t * t / 12.0 * packed[i];
       }
-      ref[34] = qp.weight;
+      ref[34] = weight;
     }
     // Where each (a, b) block of the element lands in K's value array.
     e.offsets.resize(static_cast<size_t>(mm * mm));
@@ -220,57 +233,112 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
       }
     }
   });
+}
+
+std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<const ShellModel> model, int threads,
+                                                            int jacobian_gauss_points) {
+  if (!model) fail(ErrorCode::kInvalidArgument, "NonlinearShell needs a model");
+  if (jacobian_gauss_points < 0 || jacobian_gauss_points > 10) {
+    fail(ErrorCode::kInvalidArgument, "NonlinearShell: jacobian_gauss_points must be 0..10");
+  }
+  std::shared_ptr<NonlinearShell> shell(new NonlinearShell());
+  shell->model_ = model;
+  shell->threads_ = threads;
+  const ShellModel& m = *model;
+  // The model's rule: the runs of quadrature points on one (face, sub-face), in the order K was
+  // built.
+  std::vector<Cell> cells;
+  const std::vector<QuadraturePoint>& quad = m.quadrature();
+  for (size_t q = 0; q < quad.size(); ++q) {
+    if (q == 0 || quad[q].point.face != quad[q - 1].point.face || quad[q].point.subface != quad[q - 1].point.subface) {
+      cells.push_back(Cell{quad[q].point.face, quad[q].point.subface, {}, {}});
+    }
+    cells.back().uvs.push_back({quad[q].point.u, quad[q].point.v});
+    cells.back().weights.push_back(quad[q].weight);
+  }
+  shell->build_rule(cells, threads, shell->fine_);
+  if (jacobian_gauss_points > 0) {
+    std::vector<double> gp, gw;
+    gauss_legendre_01(jacobian_gauss_points, gp, gw);
+    for (Cell& cell : cells) {
+      cell.uvs.clear();
+      cell.weights.clear();
+      for (size_t j = 0; j < gp.size(); ++j) {
+        for (size_t i = 0; i < gp.size(); ++i) {
+          cell.uvs.push_back({gp[i], gp[j]});
+          cell.weights.push_back(gw[i] * gw[j]);
+        }
+      }
+    }
+    shell->build_rule(cells, threads, shell->coarse_);
+  }
   return shell;
 }
 
 size_t NonlinearShell::memory_bytes() const {
-  size_t bytes = sizeof(*this) + reference_.size() * sizeof(double);
-  for (const Element& e : elements_) {
-    bytes += sizeof(Element) + static_cast<size_t>(e.basis.size()) * sizeof(double) +
-             (e.indices.size() + e.offsets.size()) * sizeof(int32_t);
+  size_t bytes = sizeof(*this);
+  for (const Rule* rule : {&fine_, &coarse_}) {
+    bytes += rule->reference.size() * sizeof(double);
+    for (const Element& e : rule->elements) {
+      bytes += sizeof(Element) + static_cast<size_t>(e.basis.size()) * sizeof(double) +
+               (e.indices.size() + e.offsets.size()) * sizeof(int32_t);
+    }
   }
   return bytes;
 }
 
 bool NonlinearShell::evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const {
+  return evaluate_rule(fine_, u, state, with_pressure);
+}
+
+bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, ShellState& state,
+                                   bool with_pressure) const {
   const int32_t ndof = num_dofs();
   if (u.size() != ndof) fail(ErrorCode::kInvalidArgument, "nonlinear shell: the displacement must have 3n entries");
   state.displacement = u;
-  state.points.resize(kState * num_points_);
-  std::vector<Eigen::MatrixX3d> element_force(elements_.size()), element_pressure(with_pressure ? elements_.size() : 0);
-  std::vector<double> element_energy(elements_.size(), 0.0);
-  std::vector<char> element_ok(elements_.size(), 1);
-  for_each_element([&](size_t ei) {
-    const Element& e = elements_[ei];
+  state.points.resize(kState * rule.points);
+  const size_t ne = rule.elements.size();
+  std::vector<Eigen::MatrixX3d> element_force(ne), element_pressure(with_pressure ? ne : 0);
+  std::vector<double> element_energy(ne, 0.0), element_gradient(ne, 0.0);
+  std::vector<char> element_ok(ne, 1);
+  for_each_element(rule, [&](size_t ei) {
+    const Element& e = rule.elements[ei];
     const auto p = e.points;
     const auto m = static_cast<Eigen::Index>(e.indices.size());
     Eigen::MatrixX3d local(m, 3);
     for (Eigen::Index a = 0; a < m; ++a) local.row(a) = u.segment<3>(3 * e.indices[static_cast<size_t>(a)]).transpose();
-    const Eigen::MatrixX3d deriv = e.basis.bottomRows((kRows - 1) * p) * local;
+    Eigen::MatrixX3d deriv((kRows - 1) * p, 3);
+    basis_times(e.basis, p, (kRows - 1) * p, local.data(), m, deriv.data());
     Eigen::MatrixX3d coef(kRows * p, 3);
     V3 d[5], c[kRows];
-    double energy = 0.0;
+    double energy = 0.0, gradient = 0.0;
     for (Eigen::Index q = 0; q < p; ++q) {
       for (int r = 0; r < 5; ++r) d[r] = deriv.row(r * p + q).transpose();
       const size_t point = e.first_point + static_cast<size_t>(q);
-      if (!point_forces(reference_.data() + kRef * point, d, with_pressure, state.points.data() + kState * point, c,
-                        energy)) {
+      if (!point_forces(rule.reference.data() + kRef * point, d, with_pressure, state.points.data() + kState * point,
+                        c, energy, gradient)) {
         element_ok[ei] = 0;
         return;
       }
       for (int r = 0; r < kRows; ++r) coef.row(r * p + q) = c[r].transpose();
     }
     element_energy[ei] = energy;
-    element_force[ei].noalias() = e.basis.bottomRows((kRows - 1) * p).transpose() * coef.bottomRows((kRows - 1) * p);
-    if (with_pressure) element_pressure[ei].noalias() = e.basis.topRows(p).transpose() * coef.topRows(p);
+    element_gradient[ei] = gradient;
+    element_force[ei].setZero(m, 3);
+    basis_transpose_times(e.basis, p, (kRows - 1) * p, coef.data() + p, kRows * p, m, element_force[ei].data());
+    if (with_pressure) {
+      element_pressure[ei].setZero(m, 3);
+      basis_transpose_times(e.basis, 0, p, coef.data(), kRows * p, m, element_pressure[ei].data());
+    }
   });
   state.valid = std::all_of(element_ok.begin(), element_ok.end(), [](char ok) { return ok != 0; });
   state.energy = 0.0;
+  state.max_gradient = ne ? *std::max_element(element_gradient.begin(), element_gradient.end()) : 0.0;
   state.internal_force.setZero(ndof);
   state.pressure_force.setZero(with_pressure ? ndof : 0);
   if (!state.valid) return false;
-  for (size_t ei = 0; ei < elements_.size(); ++ei) {
-    const Element& e = elements_[ei];
+  for (size_t ei = 0; ei < ne; ++ei) {
+    const Element& e = rule.elements[ei];
     state.energy += element_energy[ei];
     for (size_t a = 0; a < e.indices.size(); ++a) {
       state.internal_force.segment<3>(3 * e.indices[a]) += element_force[ei].row(static_cast<Eigen::Index>(a)).transpose();
@@ -287,52 +355,72 @@ bool NonlinearShell::evaluate(const Eigen::VectorXd& u, ShellState& state, bool 
 void NonlinearShell::tangent_product(const ShellState& state, double pressure, const Eigen::MatrixXd& v,
                                      Eigen::MatrixXd& out) const {
   const int32_t ndof = num_dofs();
-  if (!state.valid || v.rows() != ndof) fail(ErrorCode::kInternal, "nonlinear shell: tangent product of a bad state");
+  const Rule& rule = fine_;
+  if (!state.valid || v.rows() != ndof || state.points.size() != kState * rule.points) {
+    fail(ErrorCode::kInternal, "nonlinear shell: tangent product of a bad state");
+  }
   const Eigen::Index cols = v.cols();
-  std::vector<Eigen::MatrixXd> element_out(elements_.size());
-  for_each_element([&](size_t ei) {
-    const Element& e = elements_[ei];
+  std::vector<Eigen::MatrixXd> element_out(rule.elements.size());
+  for_each_element(rule, [&](size_t ei) {
+    const Element& e = rule.elements[ei];
     const auto p = e.points;
     const auto m = static_cast<Eigen::Index>(e.indices.size());
-    Eigen::MatrixXd local(m, 3 * cols);  // column 3 c + i: axis i of vector c
-    for (Eigen::Index a = 0; a < m; ++a) {
-      for (Eigen::Index c = 0; c < cols; ++c) {
-        local.block<1, 3>(a, 3 * c) = v.block<3, 1>(3 * e.indices[static_cast<size_t>(a)], c).transpose();
-      }
-    }
-    const Eigen::MatrixXd deriv = e.basis.bottomRows((kRows - 1) * p) * local;
     const Eigen::Index first = pressure != 0.0 ? 0 : p;  // the N rows only matter with a pressure
-    Eigen::MatrixXd coef(kRows * p, 3 * cols);
+    Eigen::MatrixX3d local(m, 3), deriv((kRows - 1) * p, 3), coef(kRows * p, 3);
+    Eigen::MatrixXd& result = element_out[ei];
+    result.setZero(m, 3 * cols);
     V3 d[5], c[kRows];
-    for (Eigen::Index q = 0; q < p; ++q) {
-      const size_t point = e.first_point + static_cast<size_t>(q);
-      for (Eigen::Index col = 0; col < cols; ++col) {
-        for (int r = 0; r < 5; ++r) d[r] = deriv.block<1, 3>(r * p + q, 3 * col).transpose();
-        point_tangent(reference_.data() + kRef * point, state.points.data() + kState * point, pressure, d, c);
-        for (int r = 0; r < kRows; ++r) coef.block<1, 3>(r * p + q, 3 * col) = c[r].transpose();
+    for (Eigen::Index col = 0; col < cols; ++col) {
+      for (Eigen::Index a = 0; a < m; ++a) local.row(a) = v.block<3, 1>(3 * e.indices[static_cast<size_t>(a)], col).transpose();
+      basis_times(e.basis, p, (kRows - 1) * p, local.data(), m, deriv.data());
+      for (Eigen::Index q = 0; q < p; ++q) {
+        const size_t point = e.first_point + static_cast<size_t>(q);
+        for (int r = 0; r < 5; ++r) d[r] = deriv.row(r * p + q).transpose();
+        point_tangent(rule.reference.data() + kRef * point, state.points.data() + kState * point, pressure, d, c);
+        for (int r = 0; r < kRows; ++r) coef.row(r * p + q) = c[r].transpose();
       }
+      basis_transpose_times(e.basis, first, kRows * p - first, coef.data() + first, kRows * p, m,
+                            result.data() + 3 * col * m);
     }
-    element_out[ei].noalias() = e.basis.bottomRows(kRows * p - first).transpose() * coef.bottomRows(kRows * p - first);
   });
   out.setZero(ndof, cols);
-  for (size_t ei = 0; ei < elements_.size(); ++ei) {
-    const Element& e = elements_[ei];
-    for (size_t a = 0; a < e.indices.size(); ++a) {
+  for (size_t ei = 0; ei < rule.elements.size(); ++ei) {
+    const Element& e = rule.elements[ei];
+    const auto m = static_cast<Eigen::Index>(e.indices.size());
+    for (Eigen::Index a = 0; a < m; ++a) {
       for (Eigen::Index c = 0; c < cols; ++c) {
-        out.block<3, 1>(3 * e.indices[a], c) += element_out[ei].block<1, 3>(static_cast<Eigen::Index>(a), 3 * c).transpose();
+        for (int i = 0; i < 3; ++i) out(3 * e.indices[static_cast<size_t>(a)] + i, c) += element_out[ei](a, 3 * c + i);
       }
     }
   }
 }
 
 void NonlinearShell::assemble_tangent(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const {
-  if (!state.valid) fail(ErrorCode::kInternal, "nonlinear shell: tangent of a bad state");
+  assemble_rule(fine_, state, pressure, out);
+}
+
+bool NonlinearShell::assemble_jacobian(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const {
+  if (!has_jacobian_rule()) {
+    assemble_rule(fine_, state, pressure, out);
+    return true;
+  }
+  ShellState coarse;
+  if (!evaluate_rule(coarse_, state.displacement, coarse, false)) return false;
+  assemble_rule(coarse_, coarse, pressure, out);
+  return true;
+}
+
+void NonlinearShell::assemble_rule(const Rule& rule, const ShellState& state, double pressure,
+                                   Eigen::SparseMatrix<double>& out) const {
+  if (!state.valid || state.points.size() != kState * rule.points) {
+    fail(ErrorCode::kInternal, "nonlinear shell: tangent of a bad state");
+  }
   const Eigen::SparseMatrix<double>& k = model_->stiffness();
   out = k;  // the pattern; values overwritten below
   std::fill(out.valuePtr(), out.valuePtr() + out.nonZeros(), 0.0);
-  std::vector<Eigen::MatrixXd> element_k(elements_.size());
-  for_each_element([&](size_t ei) {
-    const Element& e = elements_[ei];
+  std::vector<Eigen::MatrixXd> element_k(rule.elements.size());
+  for_each_element(rule, [&](size_t ei) {
+    const Element& e = rule.elements[ei];
     const auto p = e.points;
     const auto m = static_cast<Eigen::Index>(e.indices.size());
     // Q_q: the point's Hessian in the 18 generalized coordinates (derivative d, axis i) -> 3 d + i,
@@ -347,7 +435,7 @@ void NonlinearShell::assemble_tangent(const ShellState& state, double pressure, 
         for (int axis = 0; axis < 3; ++axis) {
           for (V3& x : d) x.setZero();
           d[r][axis] = 1.0;
-          point_tangent(reference_.data() + kRef * point, state.points.data() + kState * point, pressure, d, c);
+          point_tangent(rule.reference.data() + kRef * point, state.points.data() + kState * point, pressure, d, c);
           for (int row = 0; row < kRows; ++row) qm.block<3, 1>(3 * row, 3 * (r + 1) + axis) = c[row];
         }
       }
@@ -379,8 +467,8 @@ void NonlinearShell::assemble_tangent(const ShellState& state, double pressure, 
       }
     }
   });
-  for (size_t ei = 0; ei < elements_.size(); ++ei) {
-    const Element& e = elements_[ei];
+  for (size_t ei = 0; ei < rule.elements.size(); ++ei) {
+    const Element& e = rule.elements[ei];
     const auto m = static_cast<Eigen::Index>(e.indices.size());
     const Eigen::MatrixXd& ke = element_k[ei];
     for (Eigen::Index bl = 0; bl < m; ++bl) {

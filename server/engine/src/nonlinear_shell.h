@@ -16,6 +16,7 @@
 // Strains are computed from u,a and the reference frame without subtracting large numbers, so
 // small deformations keep their relative accuracy.
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -37,18 +38,25 @@ struct ShellState {
   /// 3n: the follower pressure force per unit pressure, integral of N_A n da over the deformed
   /// surface (zero-sized unless asked for).
   Eigen::VectorXd pressure_force;
+  /// Largest displacement gradient |u,a| / |A_a| over the points: the internal forces are
+  /// accurate to about eps E t h times it (round-off of strains that cancel in a rotation).
+  double max_gradient = 0.0;
   std::vector<double> points;      ///< per quadrature point, kPointState doubles (see .cpp)
 };
 
 class NonlinearShell {
  public:
   /// Evaluates the basis at every quadrature point of `model` (the points and weights its K was
-  /// integrated with). `threads`: 0 = hardware concurrency.
-  static std::shared_ptr<const NonlinearShell> build(std::shared_ptr<const ShellModel> model, int threads = 0);
+  /// integrated with). `threads`: 0 = hardware concurrency. `jacobian_gauss_points` > 0 adds a
+  /// second, coarse rule (that many Gauss points per direction on every (sub-)face, no
+  /// refinement) for `assemble_jacobian`: a tangent at the current state at a fraction of the
+  /// cost, for the solver's linear solves (the residual always uses the model's rule).
+  static std::shared_ptr<const NonlinearShell> build(std::shared_ptr<const ShellModel> model, int threads = 0,
+                                                     int jacobian_gauss_points = 0);
 
   const ShellModel& model() const { return *model_; }
   int32_t num_dofs() const { return model_->num_dofs(); }
-  size_t num_points() const { return num_points_; }
+  size_t num_points() const { return fine_.points; }
   size_t memory_bytes() const;
 
   /// Worker threads for the per-element work (0 = hardware concurrency); small models use one.
@@ -67,23 +75,39 @@ class NonlinearShell {
   /// surface; its symmetric part is what a Cholesky factor can take.
   void assemble_tangent(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
 
+  /// The same tangent integrated with the coarse rule (the exact one if there is none).
+  /// Returns false if the state is degenerate at a coarse point.
+  bool assemble_jacobian(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
+  bool has_jacobian_rule() const { return coarse_.points > 0; }
+
  private:
   struct Element {
     std::vector<int32_t> indices;  // m control points
     Eigen::MatrixXd basis;         // 6P x m: row d P + q is derivative d (N, ,u, ,v, ,uu, ,uv, ,vv) at point q
     size_t first_point = 0;        // into the per-point arrays
     Eigen::Index points = 0;       // P
-    std::vector<int32_t> offsets;  // m x m: 3 * rank of control point a among b's neighbours in K
+    std::vector<int32_t> offsets;  // m x m: where block (a, b) starts in K's column 3b
+  };
+  struct Rule {
+    std::vector<Element> elements;
+    std::vector<double> reference;  // per point, kPointReference doubles (see .cpp)
+    size_t points = 0;
+  };
+  struct Cell {  // (face, sub-face) and its points
+    int32_t face = 0, subface = 0;
+    std::vector<std::array<double, 2>> uvs;
+    std::vector<double> weights;
   };
   NonlinearShell() = default;
 
+  void build_rule(const std::vector<Cell>& cells, int threads, Rule& rule) const;
   template <class Fn>
-  void for_each_element(Fn&& fn) const;
+  void for_each_element(const Rule& rule, Fn&& fn) const;
+  bool evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const;
+  void assemble_rule(const Rule& rule, const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
 
   std::shared_ptr<const ShellModel> model_;
-  std::vector<Element> elements_;
-  std::vector<double> reference_;  // per point, kPointReference doubles (see .cpp)
-  size_t num_points_ = 0;
+  Rule fine_, coarse_;
   int threads_ = 0;
 };
 
