@@ -27,13 +27,13 @@ constexpr int kState = 31;
 // Derivative rows of an element's basis: 0 N, 1 ,u, 2 ,v, 3 ,uu, 4 ,uv, 5 ,vv.
 constexpr int kRows = 6;
 
-V3 load3(const double* p) { return V3(p[0], p[1], p[2]); }
-void store3(double* p, const V3& v) {
+[[gnu::always_inline]] inline V3 load3(const double* p) { return V3(p[0], p[1], p[2]); }
+[[gnu::always_inline]] inline void store3(double* p, const V3& v) {
   p[0] = v[0];
   p[1] = v[1];
   p[2] = v[2];
 }
-V3 sym_mul(const double* s, const V3& x) {
+[[gnu::always_inline]] inline V3 sym_mul(const double* s, const V3& x) {
   return V3(s[0] * x[0] + s[3] * x[1] + s[4] * x[2], s[3] * x[0] + s[1] * x[1] + s[5] * x[2],
             s[4] * x[0] + s[5] * x[1] + s[2] * x[2]);
 }
@@ -41,7 +41,7 @@ V3 sym_mul(const double* s, const V3& x) {
 // Internal force coefficients of one point: f_A = sum_d N_A,d c[d] (c[0]: the pressure force per
 // unit pressure, w (a1 x a2), when asked for). d = displacement derivatives u,u u,v u,uu u,uv u,vv.
 // Returns false for a degenerate point.
-bool point_forces(const double* ref, const V3* d, bool pressure, double* state, V3* c, double& energy,
+[[gnu::always_inline]] inline bool point_forces(const double* ref, const V3* d, bool pressure, double* state, V3* c, double& energy,
                   double& gradient) {
   const V3 A1 = load3(ref), A2 = load3(ref + 3), A11 = load3(ref + 6), A12 = load3(ref + 9), A22 = load3(ref + 12);
   const V3 T3 = load3(ref + 15), N0 = load3(ref + 19);
@@ -89,7 +89,7 @@ bool point_forces(const double* ref, const V3* d, bool pressure, double* state, 
 
 // The directional derivative of the coefficients of point_forces (minus `pressure` times the
 // pressure coefficient) for displacement derivatives v (v,u v,v v,uu v,uv v,vv).
-void point_tangent(const double* ref, const double* state, double pressure, const V3* v, V3* c) {
+[[gnu::always_inline]] inline void point_tangent(const double* ref, const double* state, double pressure, const V3* v, V3* c) {
   const V3 a1 = load3(state), a2 = load3(state + 3), a11 = load3(state + 6), a12 = load3(state + 9),
            a22 = load3(state + 12), n = load3(state + 15);
   const double j = state[18];
@@ -112,30 +112,105 @@ void point_tangent(const double* ref, const double* state, double pressure, cons
   c[5] = -(dmm[1] * n + mm[1] * dn);
 }
 
-// D (rows x 3, column-major) = W.middleRows(first, rows) * U (m x 3): one pass over the basis
-// (Eigen's GEMM would repack the whole basis for every call).
-void basis_times(const Eigen::MatrixXd& w, Eigen::Index first, Eigen::Index rows, const double* u, Eigen::Index m,
-                 double* d) {
-  Eigen::Map<Eigen::MatrixX3d> out(d, rows, 3);
-  out.setZero();
+// The hot loops are compiled twice and picked at load time: for x86-64-v3 (AVX2, FMA) where the
+// CPU has it, and for the baseline. (The build targets the baseline; these loops are most of a
+// nonlinear solve's time.)
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define SOFTSHELL_HOT __attribute__((target_clones("arch=x86-64-v3", "default"), optimize("vect-cost-model=dynamic")))
+#else
+#define SOFTSHELL_HOT
+#endif
+
+// d (rows x 3, column-major) = W u: W is `rows` x m with columns `stride` apart, u is m x 3
+// (column-major). One pass over the basis.
+[[gnu::always_inline]] inline void basis_times(const double* __restrict w, Eigen::Index stride, Eigen::Index rows, Eigen::Index m,
+                        const double* __restrict u, double* __restrict d) {
+  double* __restrict d0 = d;
+  double* __restrict d1 = d + rows;
+  double* __restrict d2 = d + 2 * rows;
+  for (Eigen::Index r = 0; r < 3 * rows; ++r) d[r] = 0.0;
   for (Eigen::Index a = 0; a < m; ++a) {
-    const auto col = w.col(a).segment(first, rows);
-    out.col(0).noalias() += u[a] * col;
-    out.col(1).noalias() += u[m + a] * col;
-    out.col(2).noalias() += u[2 * m + a] * col;
+    const double* __restrict col = w + a * stride;
+    const double u0 = u[a], u1 = u[m + a], u2 = u[2 * m + a];
+    for (Eigen::Index r = 0; r < rows; ++r) {
+      d0[r] += col[r] * u0;
+      d1[r] += col[r] * u1;
+      d2[r] += col[r] * u2;
+    }
   }
 }
 
-// F (m x 3, column-major) += W.middleRows(first, rows)^T * C (rows x 3, columns `c_stride` apart).
-void basis_transpose_times(const Eigen::MatrixXd& w, Eigen::Index first, Eigen::Index rows, const double* c,
-                           Eigen::Index c_stride, Eigen::Index m, double* f) {
-  const Eigen::Map<const Eigen::VectorXd> c0(c, rows), c1(c + c_stride, rows), c2(c + 2 * c_stride, rows);
+// f (m x 3, column-major) += W^T c: W as above, c is rows x 3 with columns `c_stride` apart.
+// Four partial sums per column keep the dot products vectorizable without reassociation.
+[[gnu::always_inline]] inline void basis_transpose_times(const double* __restrict w, Eigen::Index stride, Eigen::Index rows, Eigen::Index m,
+                                  const double* __restrict c, Eigen::Index c_stride, double* __restrict f) {
+  const double* __restrict c0 = c;
+  const double* __restrict c1 = c + c_stride;
+  const double* __restrict c2 = c + 2 * c_stride;
+  const Eigen::Index blocks = rows / 4 * 4;
   for (Eigen::Index a = 0; a < m; ++a) {
-    const auto col = w.col(a).segment(first, rows);
-    f[a] += col.dot(c0);
-    f[m + a] += col.dot(c1);
-    f[2 * m + a] += col.dot(c2);
+    const double* __restrict col = w + a * stride;
+    double s0[4] = {0, 0, 0, 0}, s1[4] = {0, 0, 0, 0}, s2[4] = {0, 0, 0, 0};
+    for (Eigen::Index r = 0; r < blocks; r += 4) {
+      for (int l = 0; l < 4; ++l) {
+        s0[l] += col[r + l] * c0[r + l];
+        s1[l] += col[r + l] * c1[r + l];
+        s2[l] += col[r + l] * c2[r + l];
+      }
+    }
+    for (Eigen::Index r = blocks; r < rows; ++r) {
+      s0[0] += col[r] * c0[r];
+      s1[0] += col[r] * c1[r];
+      s2[0] += col[r] * c2[r];
+    }
+    f[a] += (s0[0] + s0[1]) + (s0[2] + s0[3]);
+    f[m + a] += (s1[0] + s1[1]) + (s1[2] + s1[3]);
+    f[2 * m + a] += (s2[0] + s2[1]) + (s2[2] + s2[3]);
   }
+}
+
+// One element's internal forces (and pressure force per unit pressure): basis (6P x m), local
+// displacements u (m x 3), per-point reference and state arrays of its points. Scratch arrays:
+// deriv 15P, coef 18P. Returns false at a degenerate point.
+SOFTSHELL_HOT bool element_forces(const double* basis, Eigen::Index p, Eigen::Index m, const double* u,
+                                  const double* reference, double* state, bool pressure, double* deriv, double* coef,
+                                  double* force, double* pressure_force, double& energy, double& gradient) {
+  const Eigen::Index stride = kRows * p;
+  basis_times(basis + p, stride, (kRows - 1) * p, m, u, deriv);
+  const Eigen::Index rows = (kRows - 1) * p;
+  V3 d[5], c[kRows];
+  for (Eigen::Index q = 0; q < p; ++q) {
+    for (int r = 0; r < 5; ++r) d[r] = V3(deriv[r * p + q], deriv[rows + r * p + q], deriv[2 * rows + r * p + q]);
+    if (!point_forces(reference + kRef * q, d, pressure, state + kState * q, c, energy, gradient)) return false;
+    for (int r = 0; r < kRows; ++r) {
+      coef[r * p + q] = c[r][0];
+      coef[stride + r * p + q] = c[r][1];
+      coef[2 * stride + r * p + q] = c[r][2];
+    }
+  }
+  basis_transpose_times(basis + p, stride, rows, m, coef + p, stride, force);
+  if (pressure) basis_transpose_times(basis, stride, p, m, coef, stride, pressure_force);
+  return true;
+}
+
+// One element's tangent product for one vector (local values v, m x 3) into out (m x 3).
+SOFTSHELL_HOT void element_tangent(const double* basis, Eigen::Index p, Eigen::Index m, const double* v,
+                                   const double* reference, const double* state, double pressure, double* deriv,
+                                   double* coef, double* out) {
+  const Eigen::Index stride = kRows * p, rows = (kRows - 1) * p;
+  basis_times(basis + p, stride, rows, m, v, deriv);
+  V3 d[5], c[kRows];
+  for (Eigen::Index q = 0; q < p; ++q) {
+    for (int r = 0; r < 5; ++r) d[r] = V3(deriv[r * p + q], deriv[rows + r * p + q], deriv[2 * rows + r * p + q]);
+    point_tangent(reference + kRef * q, state + kState * q, pressure, d, c);
+    for (int r = 0; r < kRows; ++r) {
+      coef[r * p + q] = c[r][0];
+      coef[stride + r * p + q] = c[r][1];
+      coef[2 * stride + r * p + q] = c[r][2];
+    }
+  }
+  const Eigen::Index first = pressure != 0.0 ? 0 : p;  // the N rows only matter with a pressure
+  basis_transpose_times(basis + first, stride, stride - first, m, coef + first, stride, out);
 }
 
 }  // namespace
@@ -307,29 +382,16 @@ bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, S
     const auto m = static_cast<Eigen::Index>(e.indices.size());
     Eigen::MatrixX3d local(m, 3);
     for (Eigen::Index a = 0; a < m; ++a) local.row(a) = u.segment<3>(3 * e.indices[static_cast<size_t>(a)]).transpose();
-    Eigen::MatrixX3d deriv((kRows - 1) * p, 3);
-    basis_times(e.basis, p, (kRows - 1) * p, local.data(), m, deriv.data());
-    Eigen::MatrixX3d coef(kRows * p, 3);
-    V3 d[5], c[kRows];
+    std::vector<double> deriv(static_cast<size_t>(15 * p)), coef(static_cast<size_t>(18 * p));
+    element_force[ei].setZero(m, 3);
+    if (with_pressure) element_pressure[ei].setZero(m, 3);
     double energy = 0.0, gradient = 0.0;
-    for (Eigen::Index q = 0; q < p; ++q) {
-      for (int r = 0; r < 5; ++r) d[r] = deriv.row(r * p + q).transpose();
-      const size_t point = e.first_point + static_cast<size_t>(q);
-      if (!point_forces(rule.reference.data() + kRef * point, d, with_pressure, state.points.data() + kState * point,
-                        c, energy, gradient)) {
-        element_ok[ei] = 0;
-        return;
-      }
-      for (int r = 0; r < kRows; ++r) coef.row(r * p + q) = c[r].transpose();
-    }
+    element_ok[ei] = element_forces(e.basis.data(), p, m, local.data(), rule.reference.data() + kRef * e.first_point,
+                                    state.points.data() + kState * e.first_point, with_pressure, deriv.data(),
+                                    coef.data(), element_force[ei].data(),
+                                    with_pressure ? element_pressure[ei].data() : nullptr, energy, gradient);
     element_energy[ei] = energy;
     element_gradient[ei] = gradient;
-    element_force[ei].setZero(m, 3);
-    basis_transpose_times(e.basis, p, (kRows - 1) * p, coef.data() + p, kRows * p, m, element_force[ei].data());
-    if (with_pressure) {
-      element_pressure[ei].setZero(m, 3);
-      basis_transpose_times(e.basis, 0, p, coef.data(), kRows * p, m, element_pressure[ei].data());
-    }
   });
   state.valid = std::all_of(element_ok.begin(), element_ok.end(), [](char ok) { return ok != 0; });
   state.energy = 0.0;
@@ -365,22 +427,15 @@ void NonlinearShell::tangent_product(const ShellState& state, double pressure, c
     const Element& e = rule.elements[ei];
     const auto p = e.points;
     const auto m = static_cast<Eigen::Index>(e.indices.size());
-    const Eigen::Index first = pressure != 0.0 ? 0 : p;  // the N rows only matter with a pressure
-    Eigen::MatrixX3d local(m, 3), deriv((kRows - 1) * p, 3), coef(kRows * p, 3);
+    Eigen::MatrixX3d local(m, 3);
+    std::vector<double> deriv(static_cast<size_t>(15 * p)), coef(static_cast<size_t>(18 * p));
     Eigen::MatrixXd& result = element_out[ei];
     result.setZero(m, 3 * cols);
-    V3 d[5], c[kRows];
     for (Eigen::Index col = 0; col < cols; ++col) {
       for (Eigen::Index a = 0; a < m; ++a) local.row(a) = v.block<3, 1>(3 * e.indices[static_cast<size_t>(a)], col).transpose();
-      basis_times(e.basis, p, (kRows - 1) * p, local.data(), m, deriv.data());
-      for (Eigen::Index q = 0; q < p; ++q) {
-        const size_t point = e.first_point + static_cast<size_t>(q);
-        for (int r = 0; r < 5; ++r) d[r] = deriv.row(r * p + q).transpose();
-        point_tangent(rule.reference.data() + kRef * point, state.points.data() + kState * point, pressure, d, c);
-        for (int r = 0; r < kRows; ++r) coef.row(r * p + q) = c[r].transpose();
-      }
-      basis_transpose_times(e.basis, first, kRows * p - first, coef.data() + first, kRows * p, m,
-                            result.data() + 3 * col * m);
+      element_tangent(e.basis.data(), p, m, local.data(), rule.reference.data() + kRef * e.first_point,
+                      state.points.data() + kState * e.first_point, pressure, deriv.data(), coef.data(),
+                      result.data() + 3 * col * m);
     }
   });
   out.setZero(ndof, cols);

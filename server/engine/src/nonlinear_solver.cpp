@@ -92,7 +92,10 @@ class Run {
  private:
   bool evaluate(const Eigen::VectorXd& u, ShellState& state) {
     ++stats_.evaluations;
-    return shell_.evaluate(u, state, pressure_ != 0.0);
+    const auto t0 = Clock::now();
+    const bool ok = shell_.evaluate(u, state, pressure_ != 0.0);
+    stats_.evaluate_ms += ms_between(t0, Clock::now());
+    return ok;
   }
   // R(u, lambda): the out-of-balance force of the homotopy from the initial state (lambda = 0,
   // where R vanishes) to the request (lambda = 1).
@@ -329,7 +332,9 @@ bool Run::newton_direction(const Eigen::VectorXd& r, const Eigen::VectorXd& g, d
         fresh_ ? 2 * kMaxKrylov : kMaxKrylov);
     stats_.krylov_iterations += k.iterations;
     last_krylov_ = k.iterations;
-    if (k.iterations > 0) krylov_ms_ = ms_between(t0, Clock::now()) / k.iterations;
+    const double ms = ms_between(t0, Clock::now());
+    stats_.krylov_ms += ms;
+    if (k.iterations > 0) krylov_ms_ = ms / k.iterations;
     if (k.converged || (fresh_ && k.relative_residual < 0.5)) {
       p = pc + k.x;
       return true;

@@ -50,6 +50,8 @@ struct NonlinearStats {
   double residual = 0.0;          ///< final relative out-of-balance force (< tolerance)
   double strain_energy = 0.0;     ///< J
   double solve_ms = 0.0;          ///< total
+  double evaluate_ms = 0.0;       ///< of which evaluating internal forces
+  double krylov_ms = 0.0;         ///< of which GMRES (tangent products and preconditioner solves)
   double tangent_ms = 0.0;        ///< of which assembling and factorizing tangents
 };
 
