@@ -213,6 +213,111 @@ SOFTSHELL_HOT void element_tangent(const double* basis, Eigen::Index p, Eigen::I
   basis_transpose_times(basis + first, stride, stride - first, m, coef + first, stride, out);
 }
 
+// [v]x, the matrix of v x .
+Eigen::Matrix3d cross_matrix(const V3& v) {
+  Eigen::Matrix3d c;
+  c << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
+  return c;
+}
+
+// One element's tangent (3m x 3m, DOF 3A + i) at a state: the second derivative of the energy
+// (minus `pressure` times the symmetric part of the pressure's load stiffness).
+//  - material part: B^T D B with B the strain rows at the deformed frame (kirchhoff_love.h), as
+//    one symmetric rank update over all points (as the linear model builds K);
+//  - geometric part: sum over the points of (C (x) I3)^T G (C (x) I3), where C holds the basis
+//    "channels" N,u, N,v and mN = m11 N,uu + m22 N,vv + 2 m12 N,uv (and N with a pressure), and
+//    G the 3 x 3 blocks of the second variation of the strains times the stress resultants:
+//      (u,u) = n11 I + [(e1n)(e1g)^T + (e1g)(e1n)^T] / j + (H.n / j^2) E1^T P E1, likewise (v,v);
+//      (u,v) = n12 I + [(e1n)(e2g)^T + (e1g)(e2n)^T] / j + (H.n / j^2) E1^T P E2 + [g]x;
+//      (mN,u) = -P E1 / j, (mN,v) = -P E2 / j;
+//    with E1 = -[a2]x, E2 = [a1]x (the change of a1 x a2 per unit change of a1, a2), e1n = E1^T n,
+//    e1g = E1^T g and so on, P = I - n n^T.
+void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen::Index m, const double* reference,
+                            const double* state, double pressure, Eigen::MatrixXd& ke) {
+  Eigen::MatrixXd g(6 * p, 3 * m), w6(6, m);
+  SurfaceFrame frame;
+  const int channels = pressure != 0.0 ? 4 : 3;
+  Eigen::MatrixXd mn(p, m);                           // the mN channel
+  std::vector<Eigen::Matrix3d> blocks(static_cast<size_t>(channels * channels * p), Eigen::Matrix3d::Zero());
+  auto block = [&](int c, int d, Eigen::Index q) -> Eigen::Matrix3d& {
+    return blocks[static_cast<size_t>((c * channels + d) * p + q)];
+  };
+  for (Eigen::Index q = 0; q < p; ++q) {
+    const double* ref = reference + kRef * q;
+    const double* st = state + kState * q;
+    for (int d = 0; d < kRows; ++d) w6.row(d) = basis.row(d * p + q);
+    frame.a1 = load3(st);
+    frame.a2 = load3(st + 3);
+    frame.a11 = load3(st + 6);
+    frame.a12 = load3(st + 9);
+    frame.a22 = load3(st + 12);
+    frame.a3 = load3(st + 15);
+    frame.j = st[18];
+    Eigen::Matrix3d dm;
+    dm << ref[22], ref[25], ref[26], ref[25], ref[23], ref[27], ref[26], ref[27], ref[24];
+    const Eigen::LLT<Eigen::Matrix3d> factor(dm);
+    const Eigen::Matrix3d um = factor.matrixU();
+    const double bending = std::sqrt(ref[28] / ref[22]);  // (t^3 / 12) / t, the same for every entry
+    weighted_strain_rows(w6, frame, um, bending * um, g.middleRows(6 * q, 6));
+    // Geometric blocks.
+    const V3 a1 = frame.a1, a2 = frame.a2, n = frame.a3;
+    const double j = frame.j;
+    const V3 nm = load3(st + 19), mm = load3(st + 22), h = load3(st + 25), gv = load3(st + 28);
+    const Eigen::Matrix3d e1 = -cross_matrix(a2), e2 = cross_matrix(a1);
+    const Eigen::Matrix3d proj = Eigen::Matrix3d::Identity() - n * n.transpose();
+    const V3 e1n = e1.transpose() * n, e2n = e2.transpose() * n, e1g = e1.transpose() * gv, e2g = e2.transpose() * gv;
+    const double hn = h.dot(n) / (j * j);
+    block(0, 0, q) = nm[0] * Eigen::Matrix3d::Identity() + (e1n * e1g.transpose() + e1g * e1n.transpose()) / j +
+                     hn * e1.transpose() * proj * e1;
+    block(1, 1, q) = nm[1] * Eigen::Matrix3d::Identity() + (e2n * e2g.transpose() + e2g * e2n.transpose()) / j +
+                     hn * e2.transpose() * proj * e2;
+    block(0, 1, q) = nm[2] * Eigen::Matrix3d::Identity() + (e1n * e2g.transpose() + e1g * e2n.transpose()) / j +
+                     hn * e1.transpose() * proj * e2 + cross_matrix(gv);
+    block(1, 0, q) = block(0, 1, q).transpose();
+    block(2, 0, q) = -proj * e1 / j;
+    block(2, 1, q) = -proj * e2 / j;
+    block(0, 2, q) = block(2, 0, q).transpose();
+    block(1, 2, q) = block(2, 1, q).transpose();
+    if (channels == 4) {  // -pressure w N_A (N,u_B E1 + N,v_B E2), symmetrized
+      block(3, 0, q) = -0.5 * pressure * ref[34] * e1;
+      block(3, 1, q) = -0.5 * pressure * ref[34] * e2;
+      block(0, 3, q) = block(3, 0, q).transpose();
+      block(1, 3, q) = block(3, 1, q).transpose();
+    }
+    mn.row(q) = mm[0] * basis.row(3 * p + q) + mm[1] * basis.row(5 * p + q) + 2.0 * mm[2] * basis.row(4 * p + q);
+  }
+  ke.setZero(3 * m, 3 * m);
+  ke.selfadjointView<Eigen::Lower>().rankUpdate(g.transpose());
+  ke.triangularView<Eigen::StrictlyUpper>() = ke.transpose();
+  // Channel values per point: N,u, N,v, mN (, N).
+  Eigen::MatrixXd ch(channels * p, m);
+  ch.middleRows(0, p) = basis.middleRows(p, p);
+  ch.middleRows(p, p) = basis.middleRows(2 * p, p);
+  ch.middleRows(2 * p, p) = mn;
+  if (channels == 4) ch.middleRows(3 * p, p) = basis.topRows(p);
+  Eigen::MatrixXd z(channels * p, m), kij(m, m);
+  Eigen::VectorXd coef(p);
+  for (int i = 0; i < 3; ++i) {
+    for (int jj = i; jj < 3; ++jj) {
+      z.setZero();
+      for (int c = 0; c < channels; ++c) {
+        for (int d = 0; d < channels; ++d) {
+          if ((c >= 2 && d >= 2) || (c == 3 && d == 2) || (c == 2 && d == 3)) continue;  // zero blocks
+          for (Eigen::Index q = 0; q < p; ++q) coef[q] = block(c, d, q)(i, jj);
+          z.middleRows(c * p, p).noalias() += coef.asDiagonal() * ch.middleRows(d * p, p);
+        }
+      }
+      kij.noalias() = ch.transpose() * z;
+      for (Eigen::Index b = 0; b < m; ++b) {
+        for (Eigen::Index a = 0; a < m; ++a) {
+          ke(3 * a + i, 3 * b + jj) += kij(a, b);
+          if (jj != i) ke(3 * b + jj, 3 * a + i) += kij(a, b);
+        }
+      }
+    }
+  }
+}
+
 }  // namespace
 
 template <class Fn>
@@ -476,51 +581,9 @@ void NonlinearShell::assemble_rule(const Rule& rule, const ShellState& state, do
   std::vector<Eigen::MatrixXd> element_k(rule.elements.size());
   for_each_element(rule, [&](size_t ei) {
     const Element& e = rule.elements[ei];
-    const auto p = e.points;
-    const auto m = static_cast<Eigen::Index>(e.indices.size());
-    // Q_q: the point's Hessian in the 18 generalized coordinates (derivative d, axis i) -> 3 d + i,
-    // column by column from the tangent kernel (input d = 1..5; row d = 0 is the pressure force).
-    constexpr int kQ = 3 * kRows;
-    Eigen::MatrixXd qs(kQ * kQ, p);  // column q: Q_q column-major
-    V3 d[5], c[kRows];
-    for (Eigen::Index q = 0; q < p; ++q) {
-      const size_t point = e.first_point + static_cast<size_t>(q);
-      Eigen::Matrix<double, kQ, kQ> qm = Eigen::Matrix<double, kQ, kQ>::Zero();
-      for (int r = 0; r < 5; ++r) {
-        for (int axis = 0; axis < 3; ++axis) {
-          for (V3& x : d) x.setZero();
-          d[r][axis] = 1.0;
-          point_tangent(rule.reference.data() + kRef * point, state.points.data() + kState * point, pressure, d, c);
-          for (int row = 0; row < kRows; ++row) qm.block<3, 1>(3 * row, 3 * (r + 1) + axis) = c[row];
-        }
-      }
-      const Eigen::Matrix<double, kQ, kQ> sym = 0.5 * (qm + qm.transpose());
-      qs.col(q) = Eigen::Map<const Eigen::Matrix<double, kQ * kQ, 1>>(sym.data());
-    }
-    // K^{ij} = sum_q W_q^T Q_q^{ij} W_q per axis pair (i, j), as W^T T with T = blockdiag(Q^{ij}) W.
-    const int first_row = pressure != 0.0 ? 0 : 1;
-    Eigen::MatrixXd& ke = element_k[ei];
-    ke.setZero(3 * m, 3 * m);
-    Eigen::MatrixXd tm(kRows * p, m), kij(m, m);
-    for (int i = 0; i < 3; ++i) {
-      for (int j = i; j < 3; ++j) {
-        tm.setZero();
-        for (int dr = first_row; dr < kRows; ++dr) {
-          for (int er = first_row; er < kRows; ++er) {
-            const auto coef = qs.row((3 * er + j) * kQ + 3 * dr + i);  // Q(3 dr + i, 3 er + j) per point
-            if (coef.isZero(0.0)) continue;
-            tm.middleRows(dr * p, p).noalias() += coef.transpose().asDiagonal() * e.basis.middleRows(er * p, p);
-          }
-        }
-        kij.noalias() = e.basis.bottomRows((kRows - first_row) * p).transpose() * tm.bottomRows((kRows - first_row) * p);
-        for (Eigen::Index bl = 0; bl < m; ++bl) {
-          for (Eigen::Index al = 0; al < m; ++al) {
-            ke(3 * al + i, 3 * bl + j) = kij(al, bl);
-            ke(3 * bl + j, 3 * al + i) = kij(al, bl);
-          }
-        }
-      }
-    }
+    element_tangent_matrix(e.basis, e.points, static_cast<Eigen::Index>(e.indices.size()),
+                           rule.reference.data() + kRef * e.first_point, state.points.data() + kState * e.first_point,
+                           pressure, element_k[ei]);
   });
   for (size_t ei = 0; ei < rule.elements.size(); ++ei) {
     const Element& e = rule.elements[ei];

@@ -13,8 +13,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <sstream>
 
 #include "constraint_rows.h"
@@ -36,9 +34,9 @@ struct NonlinearMemory {
   std::shared_ptr<const Eigen::SparseMatrix<double>> matrix;  // and the matrix it factors
   bool factor_is_k = false;                                   // that matrix is the model's K
   int penalty_level = 0;                                      // constraint penalty it needed
-  // For a secant predictor: what the request asked (prescribed values, row values, loads) at
-  // `end`, and the start of that solve with what it answered (empty if unknown).
-  Eigen::VectorXd targets, previous_end, previous_targets;
+  // For the predictor of the next step: the last answers of this drag (oldest first, `end`
+  // last) with what each request asked (prescribed values, row values, loads).
+  std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>> history;  // (targets, displacement)
 };
 
 }  // namespace internal
@@ -124,6 +122,7 @@ class Run {
   void prepare_penalty();
   void refresh_tangent();
   double first_step();
+  Eigen::VectorXd predicted_path(const std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>>& history) const;
   bool solve_step(double lambda, double tolerance);
   [[noreturn]] void give_up(double lambda, const std::string& why) const;
 
@@ -139,6 +138,7 @@ class Run {
   std::unique_ptr<internal::PrescribedPath> path_of_fixed_;
   Eigen::VectorXd u0_, r0_, d0_;
   Eigen::VectorXd targets_;  // prescribed values, row values and loads of the request
+  std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>> history_;  // of the drag this solve continues
   Eigen::VectorXd path_;     // predicted du / dlambda (empty: none)
   double length_ = 1.0, force_floor_ = 0.0;
   std::shared_ptr<const NonlinearMemory> memory_in_, memory_out_;
@@ -319,9 +319,8 @@ bool Run::newton_direction(const Eigen::VectorXd& r, const Eigen::VectorXd& g, d
                            Eigen::VectorXd& p) {
   for (int attempt = 0; attempt < 2; ++attempt) {
     // Refresh when the last solve's Krylov iterations cost more than a new factor would.
-    static const bool pure = std::getenv("SOFTSHELL_NL_PURE") != nullptr;  // TEMPORARY
     const double refresh_cost = refresh_ms_ > 0.0 ? refresh_ms_ : 2.0 * krylov_ms_;  // a guess until measured
-    if (!fresh_ && (pure || (last_krylov_ > 3 && last_krylov_ * krylov_ms_ > refresh_cost))) refresh_tangent();
+    if (!fresh_ && last_krylov_ > 3 && last_krylov_ * krylov_ms_ > refresh_cost) refresh_tangent();
     const Eigen::VectorXd pc = g.isZero(0.0) ? Eigen::VectorXd::Zero(r.size())
                                              : kkt_->solve(Eigen::VectorXd::Zero(r.size()), g);
     Eigen::VectorXd rhs = r;
@@ -343,6 +342,39 @@ bool Run::newton_direction(const Eigen::VectorXd& r, const Eigen::VectorXd& g, d
     refresh_tangent();
   }
   return false;
+}
+
+// The predicted change of the answer from the last one of a drag to this request's, per unit
+// load step: the answers so far as functions of the position along the drag, extrapolated by
+// the polynomial through the last three (quadratic) or two (secant), when the requests lie on a
+// line in the space of targets (a grab moved steadily); empty otherwise.
+Eigen::VectorXd Run::predicted_path(const std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>>& history) const {
+  const Eigen::VectorXd& last = history.back().first;
+  const Eigen::VectorXd ahead = targets_ - last;
+  const double length = ahead.norm();
+  if (!(length > 0.0) || history.size() < 2) return {};
+  const Eigen::VectorXd direction = ahead / length;
+  std::vector<double> position;  // along the drag, this request at `length`, the last at 0
+  for (const auto& [t, u] : history) {
+    const Eigen::VectorXd offset = t - last;
+    const double along = offset.dot(direction);
+    if ((offset - along * direction).norm() > 0.1 * std::max(std::abs(along), 1e-300 * length)) return {};
+    position.push_back(along);
+  }
+  const size_t n = std::min<size_t>(3, history.size()), first = history.size() - n;
+  // Lagrange weights at `length` through the last n points.
+  Eigen::VectorXd predicted = Eigen::VectorXd::Zero(history.back().second.size());
+  for (size_t i = first; i < history.size(); ++i) {
+    double w = 1.0;
+    for (size_t k = first; k < history.size(); ++k) {
+      if (k == i) continue;
+      const double gap = position[i] - position[k];
+      if (!(std::abs(gap) > 1e-12 * length)) return {};
+      w *= (length - position[k]) / gap;
+    }
+    predicted += w * history[i].second;
+  }
+  return predicted - history.back().second;
 }
 
 // The linear estimate of the whole request's displacement increment (one constrained solve on
@@ -388,8 +420,6 @@ bool Run::solve_step(double lambda, double tolerance) {
     // eta <= 1e-6, curved shells 1e-3): start at 1e-3 and tighten when Newton is slow.
     if (it > 0 && res > 0.2 * previous) eta_cap = std::max(1e-8, 0.01 * eta_cap);
     const double eta = std::clamp(std::max(std::min(res, res / previous), 0.3 * tolerance / res), 1e-9, eta_cap);
-    static const bool trace = std::getenv("SOFTSHELL_NL_TRACE") != nullptr;  // TEMPORARY
-    if (trace) std::fprintf(stderr, "  lambda %.4f it %d res %.3e |oob| %.3e rows %d fresh %d eta %.1e krylov %d\n", lambda, it, res, out, rows_ok ? 1 : 0, fresh_ ? 1 : 0, eta, stats_.krylov_iterations);
     previous = res;
     Eigen::VectorXd p;
     if (!newton_direction(r, rows_ok ? Eigen::VectorXd::Zero(g.size()) : g, lambda, eta, p)) return false;
@@ -464,12 +494,11 @@ NonlinearSolution Run::run() {
   for (Eigen::Index k = 0; k < nr; ++k) targets_[nf + k] = problem_.rows[static_cast<size_t>(k)].rhs;
   targets_.segment(nf + nr, ndof) = problem_.load;
   targets_[nf + nr + ndof] = pressure_;
-  if (continues && mem->rows == row_terms && mem->fixed == problem_.fixed && mem->targets.size() == targets_.size() &&
-      mem->previous_targets.size() == targets_.size() && mem->previous_end.size() == ndof) {
-    const Eigen::VectorXd now = targets_ - mem->targets, before = mem->targets - mem->previous_targets;
-    const double scale = before.squaredNorm() > 0.0 ? now.dot(before) / before.squaredNorm() : 0.0;
-    if (scale > 0.0 && (now - scale * before).norm() <= 0.1 * now.norm()) path_ = scale * (mem->end - mem->previous_end);
-  }
+  const bool same_drag = continues && mem->rows == row_terms && mem->fixed == problem_.fixed &&
+                         !mem->history.empty() && mem->history.back().first.size() == targets_.size();
+  if (same_drag) path_ = predicted_path(mem->history);
+  history_ = same_drag ? mem->history : decltype(history_){};
+  if (!same_drag && at_rest) history_.push_back({Eigen::VectorXd::Zero(targets_.size()), u0_});  // rest answers the empty request
 
   double lambda = 0.0, step = path_.size() == ndof ? 1.0 : first_step();
   std::vector<std::pair<double, Eigen::VectorXd>> converged{{0.0, u_}};
@@ -519,13 +548,9 @@ NonlinearSolution Run::run() {
   out->matrix = matrix_;
   out->factor_is_k = factor_is_k_;
   out->penalty_level = penalty_level_;
-  out->targets = targets_;
-  out->previous_end = u0_;
-  if (continues) {
-    out->previous_targets = mem->targets;
-  } else if (at_rest) {
-    out->previous_targets = Eigen::VectorXd::Zero(targets_.size());  // rest answers the empty request
-  }
+  out->history = std::move(history_);
+  out->history.push_back({targets_, solution.displacement});
+  if (out->history.size() > 3) out->history.erase(out->history.begin());
   memory_out_ = std::move(out);
   return solution;
 }
@@ -549,8 +574,7 @@ NonlinearSolver::~NonlinearSolver() = default;
 
 std::shared_ptr<const internal::NonlinearShell> NonlinearSolver::shell() const {
   std::lock_guard lock(mutex_);
-  static const int gp = std::getenv("SOFTSHELL_NL_GP") ? std::atoi(std::getenv("SOFTSHELL_NL_GP")) : -1;  // TEMPORARY
-  if (!shell_) shell_ = internal::NonlinearShell::build(model_, options_.threads, gp >= 0 ? gp : options_.tangent_gauss_points);
+  if (!shell_) shell_ = internal::NonlinearShell::build(model_, options_.threads, options_.tangent_gauss_points);
   return shell_;
 }
 
