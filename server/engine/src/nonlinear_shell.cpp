@@ -121,66 +121,160 @@ constexpr int kRows = 6;
 #define SOFTSHELL_HOT
 #endif
 
-// d (rows x 3, column-major) = W u: W is `rows` x m with columns `stride` apart, u is m x 3
-// (column-major). One pass over the basis.
-[[gnu::always_inline]] inline void basis_times(const double* __restrict w, Eigen::Index stride, Eigen::Index rows, Eigen::Index m,
-                        const double* __restrict u, double* __restrict d) {
-  double* __restrict d0 = d;
-  double* __restrict d1 = d + rows;
-  double* __restrict d2 = d + 2 * rows;
-  for (Eigen::Index r = 0; r < 3 * rows; ++r) d[r] = 0.0;
-  for (Eigen::Index a = 0; a < m; ++a) {
-    const double* __restrict col = w + a * stride;
-    const double u0 = u[a], u1 = u[m + a], u2 = u[2 * m + a];
-    for (Eigen::Index r = 0; r < rows; ++r) {
-      d0[r] += col[r] * u0;
-      d1[r] += col[r] * u1;
-      d2[r] += col[r] * u2;
-    }
-  }
-}
+// Derivative order of basis row d (N; N,u, N,v; N,uu, N,uv, N,vv).
+constexpr int kOrder[kRows] = {0, 1, 1, 2, 2, 2};
 
-// f (m x 3, column-major) += W^T c: W as above, c is rows x 3 with columns `c_stride` apart.
-// Four partial sums per column keep the dot products vectorizable without reassociation.
-[[gnu::always_inline]] inline void basis_transpose_times(const double* __restrict w, Eigen::Index stride, Eigen::Index rows, Eigen::Index m,
-                                  const double* __restrict c, Eigen::Index c_stride, double* __restrict f) {
-  const double* __restrict c0 = c;
-  const double* __restrict c1 = c + c_stride;
-  const double* __restrict c2 = c + 2 * c_stride;
-  const Eigen::Index blocks = rows / 4 * 4;
-  for (Eigen::Index a = 0; a < m; ++a) {
-    const double* __restrict col = w + a * stride;
-    double s0[4] = {0, 0, 0, 0}, s1[4] = {0, 0, 0, 0}, s2[4] = {0, 0, 0, 0};
-    for (Eigen::Index r = 0; r < blocks; r += 4) {
-      for (int l = 0; l < 4; ++l) {
-        s0[l] += col[r + l] * c0[r + l];
-        s1[l] += col[r + l] * c1[r + l];
-        s2[l] += col[r + l] * c2[r + l];
+// Per-element point arrays below are "row r P + q" (r the derivative, q the point), with the
+// three axes 6P apart.
+
+// values = W u for one piece's points, rows first_row <= r < end_row (u: m x 3, column-major).
+[[gnu::always_inline]] inline void piece_times(const double* __restrict w, Eigen::Index w_rows, double size,
+                                               const double* __restrict bernstein, Eigen::Index first,
+                                               Eigen::Index n, Eigen::Index p, Eigen::Index m, int first_row,
+                                               int end_row, const double* __restrict u, double* __restrict values) {
+  const Eigen::Index stride = kRows * p;
+  if (size > 0.0) {
+    // Bernstein coefficients of the patch: y = R u (16 x 3), then the unit-cell basis scaled to
+    // the cell's size.
+    double y[48];
+    for (int k = 0; k < 48; ++k) y[k] = 0.0;
+    for (Eigen::Index a = 0; a < m; ++a) {
+      const double* __restrict col = w + a * w_rows;
+      const double u0 = u[a], u1 = u[m + a], u2 = u[2 * m + a];
+      for (int k = 0; k < 16; ++k) {
+        y[k] += col[k] * u0;
+        y[16 + k] += col[k] * u1;
+        y[32 + k] += col[k] * u2;
       }
     }
-    for (Eigen::Index r = blocks; r < rows; ++r) {
-      s0[0] += col[r] * c0[r];
-      s1[0] += col[r] * c1[r];
-      s2[0] += col[r] * c2[r];
+    for (int r = first_row; r < end_row; ++r) {
+      const double scale = kOrder[r] == 0 ? 1.0 : kOrder[r] == 1 ? 1.0 / size : 1.0 / (size * size);
+      for (Eigen::Index q = 0; q < n; ++q) {
+        const double* __restrict b = bernstein + 16 * (r * n + q);  // the basis at point q, row r
+        double v0 = 0.0, v1 = 0.0, v2 = 0.0;
+        for (int k = 0; k < 16; ++k) {
+          const double bk = b[k];
+          v0 += bk * y[k];
+          v1 += bk * y[16 + k];
+          v2 += bk * y[32 + k];
+        }
+        const Eigen::Index at = r * p + first + q;
+        values[at] = scale * v0;
+        values[stride + at] = scale * v1;
+        values[2 * stride + at] = scale * v2;
+      }
     }
-    f[a] += (s0[0] + s0[1]) + (s0[2] + s0[3]);
-    f[m + a] += (s1[0] + s1[1]) + (s1[2] + s1[3]);
-    f[2 * m + a] += (s2[0] + s2[1]) + (s2[2] + s2[3]);
+    return;
+  }
+  for (int r = first_row; r < end_row; ++r) {
+    double* __restrict d0 = values + r * p + first;
+    double* __restrict d1 = d0 + stride;
+    double* __restrict d2 = d0 + 2 * stride;
+    for (Eigen::Index q = 0; q < n; ++q) d0[q] = d1[q] = d2[q] = 0.0;
+    for (Eigen::Index a = 0; a < m; ++a) {
+      const double* __restrict col = w + a * w_rows + r * n;
+      const double u0 = u[a], u1 = u[m + a], u2 = u[2 * m + a];
+      for (Eigen::Index q = 0; q < n; ++q) {
+        d0[q] += col[q] * u0;
+        d1[q] += col[q] * u1;
+        d2[q] += col[q] * u2;
+      }
+    }
   }
 }
 
-// One element's internal forces (and pressure force per unit pressure): basis (6P x m), local
-// displacements u (m x 3), per-point reference and state arrays of its points. Scratch arrays:
-// deriv 15P, coef 18P. Returns false at a degenerate point.
-SOFTSHELL_HOT bool element_forces(const double* basis, Eigen::Index p, Eigen::Index m, const double* u,
-                                  const double* reference, double* state, bool pressure, double* deriv, double* coef,
-                                  double* force, double* pressure_force, double& energy, double& gradient) {
+// f (m x 3, column-major) += W^T coef over one piece's points, rows first_row <= r < end_row. Four
+// partial sums keep the dot products vectorizable without reassociation.
+[[gnu::always_inline]] inline void piece_transpose_times(const double* __restrict w, Eigen::Index w_rows, double size,
+                                                         const double* __restrict bernstein, Eigen::Index first,
+                                                         Eigen::Index n, Eigen::Index p, Eigen::Index m, int first_row,
+                                                         int end_row, const double* __restrict coef,
+                                                         double* __restrict f) {
   const Eigen::Index stride = kRows * p;
-  basis_times(basis + p, stride, (kRows - 1) * p, m, u, deriv);
-  const Eigen::Index rows = (kRows - 1) * p;
+  if (size > 0.0) {
+    double z[48];
+    for (int k = 0; k < 48; ++k) z[k] = 0.0;
+    for (int r = first_row; r < end_row; ++r) {
+      const double scale = kOrder[r] == 0 ? 1.0 : kOrder[r] == 1 ? 1.0 / size : 1.0 / (size * size);
+      for (Eigen::Index q = 0; q < n; ++q) {
+        const Eigen::Index at = r * p + first + q;
+        const double c0 = scale * coef[at], c1 = scale * coef[stride + at], c2 = scale * coef[2 * stride + at];
+        const double* __restrict b = bernstein + 16 * (r * n + q);
+        for (int k = 0; k < 16; ++k) {
+          const double bk = b[k];
+          z[k] += bk * c0;
+          z[16 + k] += bk * c1;
+          z[32 + k] += bk * c2;
+        }
+      }
+    }
+    for (Eigen::Index a = 0; a < m; ++a) {
+      const double* __restrict col = w + a * w_rows;
+      double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+      for (int k = 0; k < 16; ++k) {
+        s0 += col[k] * z[k];
+        s1 += col[k] * z[16 + k];
+        s2 += col[k] * z[32 + k];
+      }
+      f[a] += s0;
+      f[m + a] += s1;
+      f[2 * m + a] += s2;
+    }
+    return;
+  }
+  for (int r = first_row; r < end_row; ++r) {
+    const double* __restrict c0 = coef + r * p + first;
+    const double* __restrict c1 = c0 + stride;
+    const double* __restrict c2 = c0 + 2 * stride;
+    const Eigen::Index blocks = n / 4 * 4;
+    for (Eigen::Index a = 0; a < m; ++a) {
+      const double* __restrict col = w + a * w_rows + r * n;
+      double s0[4] = {0, 0, 0, 0}, s1[4] = {0, 0, 0, 0}, s2[4] = {0, 0, 0, 0};
+      for (Eigen::Index q = 0; q < blocks; q += 4) {
+        for (int l = 0; l < 4; ++l) {
+          s0[l] += col[q + l] * c0[q + l];
+          s1[l] += col[q + l] * c1[q + l];
+          s2[l] += col[q + l] * c2[q + l];
+        }
+      }
+      for (Eigen::Index q = blocks; q < n; ++q) {
+        s0[0] += col[q] * c0[q];
+        s1[0] += col[q] * c1[q];
+        s2[0] += col[q] * c2[q];
+      }
+      f[a] += (s0[0] + s0[1]) + (s0[2] + s0[3]);
+      f[m + a] += (s1[0] + s1[1]) + (s1[2] + s1[3]);
+      f[2 * m + a] += (s2[0] + s2[1]) + (s2[2] + s2[3]);
+    }
+  }
+}
+
+// What the per-element kernels need of an element (plain pointers, so the kernels can be
+// compiled for two targets).
+struct PieceView {
+  const double* w;
+  Eigen::Index w_rows, first, points;
+  double size;
+};
+
+// One element's internal forces (and pressure force per unit pressure) from its local
+// displacements u (m x 3), with the per-point reference and state arrays of its points. Scratch
+// arrays of 18P: values, coef. Returns false at a degenerate point.
+SOFTSHELL_HOT bool element_forces(const PieceView* pieces, size_t count, const double* bernstein, Eigen::Index p,
+                                  Eigen::Index m, const double* u, const double* reference, double* state,
+                                  bool pressure, double* values, double* coef, double* force, double* pressure_force,
+                                  double& energy, double& gradient) {
+  const Eigen::Index stride = kRows * p;
+  for (size_t i = 0; i < count; ++i) {
+    const PieceView& pc = pieces[i];
+    piece_times(pc.w, pc.w_rows, pc.size, bernstein, pc.first, pc.points, p, m, 1, kRows, u, values);
+  }
   V3 d[5], c[kRows];
   for (Eigen::Index q = 0; q < p; ++q) {
-    for (int r = 0; r < 5; ++r) d[r] = V3(deriv[r * p + q], deriv[rows + r * p + q], deriv[2 * rows + r * p + q]);
+    for (int r = 0; r < 5; ++r) {
+      const Eigen::Index at = (r + 1) * p + q;
+      d[r] = V3(values[at], values[stride + at], values[2 * stride + at]);
+    }
     if (!point_forces(reference + kRef * q, d, pressure, state + kState * q, c, energy, gradient)) return false;
     for (int r = 0; r < kRows; ++r) {
       coef[r * p + q] = c[r][0];
@@ -188,20 +282,31 @@ SOFTSHELL_HOT bool element_forces(const double* basis, Eigen::Index p, Eigen::In
       coef[2 * stride + r * p + q] = c[r][2];
     }
   }
-  basis_transpose_times(basis + p, stride, rows, m, coef + p, stride, force);
-  if (pressure) basis_transpose_times(basis, stride, p, m, coef, stride, pressure_force);
+  for (size_t i = 0; i < count; ++i) {
+    const PieceView& pc = pieces[i];
+    piece_transpose_times(pc.w, pc.w_rows, pc.size, bernstein, pc.first, pc.points, p, m, 1, kRows, coef, force);
+    if (pressure) {  // the N rows: the pressure force per unit pressure
+      piece_transpose_times(pc.w, pc.w_rows, pc.size, bernstein, pc.first, pc.points, p, m, 0, 1, coef, pressure_force);
+    }
+  }
   return true;
 }
 
 // One element's tangent product for one vector (local values v, m x 3) into out (m x 3).
-SOFTSHELL_HOT void element_tangent(const double* basis, Eigen::Index p, Eigen::Index m, const double* v,
-                                   const double* reference, const double* state, double pressure, double* deriv,
-                                   double* coef, double* out) {
-  const Eigen::Index stride = kRows * p, rows = (kRows - 1) * p;
-  basis_times(basis + p, stride, rows, m, v, deriv);
+SOFTSHELL_HOT void element_tangent(const PieceView* pieces, size_t count, const double* bernstein, Eigen::Index p,
+                                   Eigen::Index m, const double* v, const double* reference, const double* state,
+                                   double pressure, double* values, double* coef, double* out) {
+  const Eigen::Index stride = kRows * p;
+  for (size_t i = 0; i < count; ++i) {
+    const PieceView& pc = pieces[i];
+    piece_times(pc.w, pc.w_rows, pc.size, bernstein, pc.first, pc.points, p, m, 1, kRows, v, values);
+  }
   V3 d[5], c[kRows];
   for (Eigen::Index q = 0; q < p; ++q) {
-    for (int r = 0; r < 5; ++r) d[r] = V3(deriv[r * p + q], deriv[rows + r * p + q], deriv[2 * rows + r * p + q]);
+    for (int r = 0; r < 5; ++r) {
+      const Eigen::Index at = (r + 1) * p + q;
+      d[r] = V3(values[at], values[stride + at], values[2 * stride + at]);
+    }
     point_tangent(reference + kRef * q, state + kState * q, pressure, d, c);
     for (int r = 0; r < kRows; ++r) {
       coef[r * p + q] = c[r][0];
@@ -209,8 +314,11 @@ SOFTSHELL_HOT void element_tangent(const double* basis, Eigen::Index p, Eigen::I
       coef[2 * stride + r * p + q] = c[r][2];
     }
   }
-  const Eigen::Index first = pressure != 0.0 ? 0 : p;  // the N rows only matter with a pressure
-  basis_transpose_times(basis + first, stride, stride - first, m, coef + first, stride, out);
+  const int first_row = pressure != 0.0 ? 0 : 1;  // the N rows only matter with a pressure
+  for (size_t i = 0; i < count; ++i) {
+    const PieceView& pc = pieces[i];
+    piece_transpose_times(pc.w, pc.w_rows, pc.size, bernstein, pc.first, pc.points, p, m, first_row, kRows, coef, out);
+  }
 }
 
 // [v]x, the matrix of v x .
@@ -344,7 +452,37 @@ void NonlinearShell::for_each_element(const Rule& rule, Fn&& fn) const {
   });
 }
 
-void NonlinearShell::build_rule(const std::vector<Cell>& cells, int threads, Rule& rule) const {
+// The unit cell's bicubic Bernstein basis and its derivatives at the n x n Gauss points (row
+// d n^2 + j n + i, column a + 4 b for B_a(u) B_b(v)).
+Eigen::MatrixXd bernstein_basis(int n) {
+  std::vector<double> gp, gw;
+  gauss_legendre_01(n, gp, gw);
+  auto b = [](int a, int order, double t) {
+    const double s = 1.0 - t;
+    switch (order) {
+      case 0: return a == 0 ? s * s * s : a == 1 ? 3 * t * s * s : a == 2 ? 3 * t * t * s : t * t * t;
+      case 1: return a == 0 ? -3 * s * s : a == 1 ? 3 * s * s - 6 * t * s : a == 2 ? 6 * t * s - 3 * t * t : 3 * t * t;
+      default: return a == 0 ? 6 * s : a == 1 ? 18 * t - 12 : a == 2 ? 6 - 18 * t : 6 * t;
+    }
+  };
+  constexpr int kU[kRows] = {0, 1, 0, 2, 1, 0}, kV[kRows] = {0, 0, 1, 0, 1, 2};  // derivative orders
+  const int nn = n * n;
+  Eigen::MatrixXd out(kRows * nn, 16);
+  for (int d = 0; d < kRows; ++d) {
+    for (int j = 0; j < n; ++j) {
+      for (int i = 0; i < n; ++i) {
+        for (int bv = 0; bv < 4; ++bv) {
+          for (int bu = 0; bu < 4; ++bu) {
+            out(d * nn + j * n + i, bu + 4 * bv) = b(bu, kU[d], gp[static_cast<size_t>(i)]) * b(bv, kV[d], gp[static_cast<size_t>(j)]);
+          }
+        }
+      }
+    }
+  }
+  return out;
+}
+
+void NonlinearShell::build_rule(const std::vector<Cell>& cells, int gauss, int threads, Rule& rule) const {
   const ShellModel& m = *model_;
   rule.elements.resize(cells.size());
   size_t points = 0;
@@ -355,6 +493,12 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, int threads, Rul
   }
   rule.points = points;
   rule.reference.assign(kRef * points, 0.0);
+  rule.gauss = gauss;
+  rule.bernstein = bernstein_basis(gauss);
+  rule.bernstein_t = rule.bernstein.transpose();
+  const Eigen::HouseholderQR<Eigen::MatrixXd> bernstein_qr(rule.bernstein);
+  std::vector<double> gp, gw;
+  gauss_legendre_01(gauss, gp, gw);
   const Eigen::SparseMatrix<double>& k = m.stiffness();
   const Material& mat = m.material();
   const double t = mat.thickness;
@@ -365,15 +509,15 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, int threads, Rul
     Eigen::MatrixXd bfr;  // 6P x m, rows 6q + d
     m.evaluator().face_stencils(cell.face, cell.subface, cell.uvs, e.indices, bfr);
     const auto mm = static_cast<Eigen::Index>(e.indices.size());
-    e.basis.resize(kRows * p, mm);
+    Eigen::MatrixXd basis(kRows * p, mm);
     for (Eigen::Index q = 0; q < p; ++q) {
-      for (int d = 0; d < kRows; ++d) e.basis.row(d * p + q) = bfr.row(kRows * q + d);
+      for (int d = 0; d < kRows; ++d) basis.row(d * p + q) = bfr.row(kRows * q + d);
     }
     Eigen::MatrixX3d x(mm, 3);
     for (Eigen::Index a = 0; a < mm; ++a) {
       x.row(a) = m.mesh().positions()[static_cast<size_t>(e.indices[static_cast<size_t>(a)])].transpose();
     }
-    const Eigen::MatrixX3d deriv = e.basis * x;
+    const Eigen::MatrixX3d deriv = basis * x;
     SurfaceFrame frame;
     for (Eigen::Index q = 0; q < p; ++q) {
       // The same frame and material matrix the linear model was integrated with.
@@ -396,6 +540,55 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, int threads, Rul
         ref[28 + i] = da * t * t * t / 12.0 * packed[i];
       }
       ref[34] = weight;
+    }
+    // Pieces: each run of gauss^2 points that is a square cell of the rule (points at u0 + s g_i,
+    // v0 + s g_j, weights s^2 w_i w_j) and on which the basis is a bicubic polynomial to
+    // round-off keeps 16 Bernstein coefficients per control point instead of its weights.
+    const Eigen::Index cell_points = static_cast<Eigen::Index>(gauss) * gauss;
+    auto take_weights = [&](Eigen::Index first, Eigen::Index count) {
+      Piece piece;
+      piece.first = first;
+      piece.points = count;
+      piece.w.resize(kRows * count, mm);
+      for (int d = 0; d < kRows; ++d) piece.w.middleRows(d * count, count) = basis.middleRows(d * p + first, count);
+      return piece;
+    };
+    if (p % cell_points != 0) {
+      e.pieces.push_back(take_weights(0, p));
+    } else {
+      for (Eigen::Index first = 0; first < p; first += cell_points) {
+        double area = 0.0;
+        for (Eigen::Index q = first; q < first + cell_points; ++q) area += cell.weights[static_cast<size_t>(q)];
+        const double size = std::sqrt(area);
+        const double u0 = cell.uvs[static_cast<size_t>(first)][0] - size * gp[0];
+        const double v0 = cell.uvs[static_cast<size_t>(first)][1] - size * gp[0];
+        bool square = size > 0.0;
+        for (Eigen::Index q = 0; q < cell_points && square; ++q) {
+          const auto& uv = cell.uvs[static_cast<size_t>(first + q)];
+          square = std::abs(uv[0] - (u0 + size * gp[static_cast<size_t>(q % gauss)])) <= 1e-12 &&
+                   std::abs(uv[1] - (v0 + size * gp[static_cast<size_t>(q / gauss)])) <= 1e-12;
+        }
+        Piece piece = take_weights(first, cell_points);
+        if (square) {
+          // Fit on the unit cell: derivatives of order k carry size^k.
+          Eigen::MatrixXd scaled = piece.w;
+          for (int d = 0; d < kRows; ++d) scaled.middleRows(d * cell_points, cell_points) *= std::pow(size, kOrder[d]);
+          const Eigen::MatrixXd coef = bernstein_qr.solve(scaled);
+          const Eigen::MatrixXd back = rule.bernstein * coef;
+          bool exact = true;
+          const double overall = scaled.cwiseAbs().maxCoeff();
+          for (int d = 0; d < kRows && exact; ++d) {
+            const auto block = scaled.middleRows(d * cell_points, cell_points);
+            const double top = std::max(block.cwiseAbs().maxCoeff(), 1e-6 * overall);
+            exact = (back.middleRows(d * cell_points, cell_points) - block).cwiseAbs().maxCoeff() <= 1e-13 * top;
+          }
+          if (exact) {
+            piece.w = coef;
+            piece.size = size;
+          }
+        }
+        e.pieces.push_back(std::move(piece));
+      }
     }
     // Where each (a, b) block of the element lands in K's value array.
     e.offsets.resize(static_cast<size_t>(mm * mm));
@@ -436,7 +629,7 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
     cells.back().uvs.push_back({quad[q].point.u, quad[q].point.v});
     cells.back().weights.push_back(quad[q].weight);
   }
-  shell->build_rule(cells, threads, shell->fine_);
+  shell->build_rule(cells, m.options().quadrature.gauss_points, threads, shell->fine_);
   if (jacobian_gauss_points > 0) {
     std::vector<double> gp, gw;
     gauss_legendre_01(jacobian_gauss_points, gp, gw);
@@ -450,9 +643,26 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
         }
       }
     }
-    shell->build_rule(cells, threads, shell->coarse_);
+    shell->build_rule(cells, jacobian_gauss_points, threads, shell->coarse_);
   }
   return shell;
+}
+
+Eigen::MatrixXd NonlinearShell::element_basis(const Rule& rule, const Element& e) {
+  const auto p = e.points;
+  Eigen::MatrixXd basis(kRows * p, static_cast<Eigen::Index>(e.indices.size()));
+  for (const Piece& piece : e.pieces) {
+    const Eigen::Index n = piece.points;
+    if (piece.size > 0.0) {
+      const Eigen::MatrixXd w = rule.bernstein * piece.w;
+      for (int d = 0; d < kRows; ++d) {
+        basis.middleRows(d * p + piece.first, n) = w.middleRows(d * n, n) / std::pow(piece.size, kOrder[d]);
+      }
+    } else {
+      for (int d = 0; d < kRows; ++d) basis.middleRows(d * p + piece.first, n) = piece.w.middleRows(d * n, n);
+    }
+  }
+  return basis;
 }
 
 size_t NonlinearShell::memory_bytes() const {
@@ -460,8 +670,8 @@ size_t NonlinearShell::memory_bytes() const {
   for (const Rule* rule : {&fine_, &coarse_}) {
     bytes += rule->reference.size() * sizeof(double);
     for (const Element& e : rule->elements) {
-      bytes += sizeof(Element) + static_cast<size_t>(e.basis.size()) * sizeof(double) +
-               (e.indices.size() + e.offsets.size()) * sizeof(int32_t);
+      bytes += sizeof(Element) + (e.indices.size() + e.offsets.size()) * sizeof(int32_t);
+      for (const Piece& piece : e.pieces) bytes += sizeof(Piece) + static_cast<size_t>(piece.w.size()) * sizeof(double);
     }
   }
   return bytes;
@@ -487,12 +697,15 @@ bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, S
     const auto m = static_cast<Eigen::Index>(e.indices.size());
     Eigen::MatrixX3d local(m, 3);
     for (Eigen::Index a = 0; a < m; ++a) local.row(a) = u.segment<3>(3 * e.indices[static_cast<size_t>(a)]).transpose();
-    std::vector<double> deriv(static_cast<size_t>(15 * p)), coef(static_cast<size_t>(18 * p));
+    std::vector<double> values(static_cast<size_t>(18 * p)), coef(static_cast<size_t>(18 * p));
+    std::vector<PieceView> pieces;
+    for (const Piece& pc : e.pieces) pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size});
     element_force[ei].setZero(m, 3);
     if (with_pressure) element_pressure[ei].setZero(m, 3);
     double energy = 0.0, gradient = 0.0;
-    element_ok[ei] = element_forces(e.basis.data(), p, m, local.data(), rule.reference.data() + kRef * e.first_point,
-                                    state.points.data() + kState * e.first_point, with_pressure, deriv.data(),
+    element_ok[ei] = element_forces(pieces.data(), pieces.size(), rule.bernstein_t.data(), p, m, local.data(),
+                                    rule.reference.data() + kRef * e.first_point,
+                                    state.points.data() + kState * e.first_point, with_pressure, values.data(),
                                     coef.data(), element_force[ei].data(),
                                     with_pressure ? element_pressure[ei].data() : nullptr, energy, gradient);
     element_energy[ei] = energy;
@@ -533,14 +746,16 @@ void NonlinearShell::tangent_product(const ShellState& state, double pressure, c
     const auto p = e.points;
     const auto m = static_cast<Eigen::Index>(e.indices.size());
     Eigen::MatrixX3d local(m, 3);
-    std::vector<double> deriv(static_cast<size_t>(15 * p)), coef(static_cast<size_t>(18 * p));
+    std::vector<double> values(static_cast<size_t>(18 * p)), coef(static_cast<size_t>(18 * p));
+    std::vector<PieceView> pieces;
+    for (const Piece& pc : e.pieces) pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size});
     Eigen::MatrixXd& result = element_out[ei];
     result.setZero(m, 3 * cols);
     for (Eigen::Index col = 0; col < cols; ++col) {
       for (Eigen::Index a = 0; a < m; ++a) local.row(a) = v.block<3, 1>(3 * e.indices[static_cast<size_t>(a)], col).transpose();
-      element_tangent(e.basis.data(), p, m, local.data(), rule.reference.data() + kRef * e.first_point,
-                      state.points.data() + kState * e.first_point, pressure, deriv.data(), coef.data(),
-                      result.data() + 3 * col * m);
+      element_tangent(pieces.data(), pieces.size(), rule.bernstein_t.data(), p, m, local.data(),
+                      rule.reference.data() + kRef * e.first_point, state.points.data() + kState * e.first_point,
+                      pressure, values.data(), coef.data(), result.data() + 3 * col * m);
     }
   });
   out.setZero(ndof, cols);
@@ -581,7 +796,7 @@ void NonlinearShell::assemble_rule(const Rule& rule, const ShellState& state, do
   std::vector<Eigen::MatrixXd> element_k(rule.elements.size());
   for_each_element(rule, [&](size_t ei) {
     const Element& e = rule.elements[ei];
-    element_tangent_matrix(e.basis, e.points, static_cast<Eigen::Index>(e.indices.size()),
+    element_tangent_matrix(element_basis(rule, e), e.points, static_cast<Eigen::Index>(e.indices.size()),
                            rule.reference.data() + kRef * e.first_point, state.points.data() + kState * e.first_point,
                            pressure, element_k[ei]);
   });

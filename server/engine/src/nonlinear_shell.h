@@ -81,9 +81,20 @@ class NonlinearShell {
   bool has_jacobian_rule() const { return coarse_.points > 0; }
 
  private:
+  // A run of an element's points. Where the run is one cell of the quadrature (n x n Gauss points
+  // on a square) inside one polynomial piece of the limit surface (a regular patch, or a
+  // sub-patch of an extraordinary face's patch tree), its basis is exactly the rule's bicubic
+  // Bernstein basis at the cell's points times 16 x m coefficients: 1/6 of the weights to store
+  // and stream through memory, the bottleneck of a pass over the points. Other runs keep them.
+  struct Piece {
+    Eigen::Index first = 0;   // first point within the element
+    Eigen::Index points = 0;
+    double size = 0.0;        // > 0: w holds Bernstein coefficients (16 x m) on a cell of this edge length
+    Eigen::MatrixXd w;        // otherwise the weights, 6 points x m: row d * points + q
+  };
   struct Element {
     std::vector<int32_t> indices;  // m control points
-    Eigen::MatrixXd basis;         // 6P x m: row d P + q is derivative d (N, ,u, ,v, ,uu, ,uv, ,vv) at point q
+    std::vector<Piece> pieces;
     size_t first_point = 0;        // into the per-point arrays
     Eigen::Index points = 0;       // P
     std::vector<int32_t> offsets;  // m x m: where block (a, b) starts in K's column 3b
@@ -92,6 +103,9 @@ class NonlinearShell {
     std::vector<Element> elements;
     std::vector<double> reference;  // per point, kPointReference doubles (see .cpp)
     size_t points = 0;
+    int gauss = 0;                  // Gauss points per direction of its cells
+    Eigen::MatrixXd bernstein;      // 6 gauss^2 x 16: the unit cell's bicubic basis at its points
+    Eigen::MatrixXd bernstein_t;    // its transpose (the 16 values at a point contiguous)
   };
   struct Cell {  // (face, sub-face) and its points
     int32_t face = 0, subface = 0;
@@ -100,7 +114,8 @@ class NonlinearShell {
   };
   NonlinearShell() = default;
 
-  void build_rule(const std::vector<Cell>& cells, int threads, Rule& rule) const;
+  void build_rule(const std::vector<Cell>& cells, int gauss, int threads, Rule& rule) const;
+  static Eigen::MatrixXd element_basis(const Rule& rule, const Element& e);  // 6P x m
   template <class Fn>
   void for_each_element(const Rule& rule, Fn&& fn) const;
   bool evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const;
