@@ -431,7 +431,7 @@ void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen:
 template <class Fn>
 void NonlinearShell::for_each_element(const Rule& rule, Fn&& fn) const {
   // Chunks of about the same number of points, so both threads finish together.
-  constexpr size_t kPointsPerChunk = 4096;
+  constexpr size_t kPointsPerChunk = 1024;
   const int threads = rule.points < 2 * kPointsPerChunk ? 1 : resolve_threads(threads_);
   if (threads == 1) {
     for (size_t e = 0; e < rule.elements.size(); ++e) fn(e);
