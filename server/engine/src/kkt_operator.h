@@ -8,16 +8,45 @@
 // factor does not eliminate become unit rows. Used by the nonlinear solver as its Newton step and
 // as the preconditioner of its quasi-Newton iterations.
 
+#include <cmath>
 #include <memory>
 #include <vector>
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
-#include "constraint_rows.h"
+#include <Eigen/Dense>
+
 #include "factorization.h"
+#include "problem.h"
 
 namespace softshell::engine::internal {
+
+/// The small dense symmetric system of the Schur complement, decomposed once and solved for
+/// several right-hand sides: symmetric diagonal scaling, then a complete orthogonal decomposition
+/// (minimum-norm solution when redundant constraints make it singular).
+class SmallSystem {
+ public:
+  SmallSystem() = default;
+  explicit SmallSystem(const Eigen::MatrixXd& s) : scale_(s.rows()) {
+    for (Eigen::Index i = 0; i < s.rows(); ++i) {
+      const double diag = std::abs(s(i, i));
+      const double mag = diag > 0.0 ? diag : s.row(i).cwiseAbs().maxCoeff();
+      scale_[i] = mag > 0.0 ? 1.0 / std::sqrt(mag) : 1.0;
+    }
+    if (s.rows() == 0) return;
+    cod_.setThreshold(1e-11);
+    cod_.compute(scale_.asDiagonal() * s * scale_.asDiagonal());
+  }
+  Eigen::VectorXd solve(const Eigen::VectorXd& r) const {
+    if (r.size() == 0) return Eigen::VectorXd();
+    return scale_.asDiagonal() * cod_.solve(scale_.asDiagonal() * r);
+  }
+
+ private:
+  Eigen::VectorXd scale_;
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod_;
+};
 
 class KktOperator {
  public:

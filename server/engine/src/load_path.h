@@ -9,7 +9,7 @@
 
 #include <Eigen/Core>
 
-#include "constraint_rows.h"
+#include "problem.h"
 #include "softshell/control_mesh.h"
 
 namespace softshell::engine::internal {

@@ -8,7 +8,6 @@
 
 #include "kirchhoff_love.h"
 #include "nonlinear_element.h"
-#include "parallel.h"
 #include "quadrature.h"
 
 namespace softshell::engine::internal {
@@ -16,11 +15,16 @@ namespace softshell::engine::internal {
 using namespace nonlinear_kernel;
 using V3 = Eigen::Vector3d;
 
+int NonlinearShell::workers(int requested) const {
+  const int most = executor_->concurrency();
+  return requested > 0 ? std::min(requested, most) : most;
+}
+
 template <class Fn>
 void NonlinearShell::for_each_element(const Rule& rule, Fn&& fn) const {
   // Chunks of about the same number of points, so both threads finish together.
   constexpr size_t kPointsPerChunk = 1024;
-  const int threads = rule.points < 2 * kPointsPerChunk ? 1 : resolve_threads(threads_);
+  const int threads = rule.points < 2 * kPointsPerChunk ? 1 : workers(threads_);
   if (threads == 1) {
     for (size_t e = 0; e < rule.elements.size(); ++e) fn(e);
     return;
@@ -35,9 +39,9 @@ void NonlinearShell::for_each_element(const Rule& rule, Fn&& fn) const {
     }
   }
   if (starts.back() != rule.elements.size()) starts.push_back(rule.elements.size());
-  parallel_for(0, static_cast<int64_t>(starts.size() - 1), threads, [&](int64_t c) {
+  executor_->parallel_for(0, static_cast<int64_t>(starts.size() - 1), [&](int64_t c) {
     for (size_t e = starts[static_cast<size_t>(c)]; e < starts[static_cast<size_t>(c) + 1]; ++e) fn(e);
-  });
+  }, threads);
 }
 
 void NonlinearShell::build_rule(const std::vector<Cell>& cells, int gauss, int threads, Rule& rule) const {
@@ -60,7 +64,7 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, int gauss, int t
   const Eigen::SparseMatrix<double>& k = m.stiffness();
   const Material& mat = m.material();
   const double t = mat.thickness;
-  parallel_for(0, static_cast<int64_t>(cells.size()), resolve_threads(threads), [&](int64_t ci) {
+  executor_->parallel_for(0, static_cast<int64_t>(cells.size()), [&](int64_t ci) {
     const Cell& cell = cells[static_cast<size_t>(ci)];
     Element& e = rule.elements[static_cast<size_t>(ci)];
     const auto p = e.points;
@@ -163,11 +167,12 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, int gauss, int t
         e.offsets[static_cast<size_t>(al + mm * bl)] = static_cast<int32_t>(it - begin);
       }
     }
-  });
+  }, workers(threads));
 }
 
 std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<const ShellModel> model, int threads,
-                                                            int jacobian_gauss_points) {
+                                                            int jacobian_gauss_points,
+                                                            std::shared_ptr<Executor> executor) {
   if (!model) fail(ErrorCode::kInvalidArgument, "NonlinearShell needs a model");
   if (jacobian_gauss_points < 0 || jacobian_gauss_points > 10) {
     fail(ErrorCode::kInvalidArgument, "NonlinearShell: jacobian_gauss_points must be 0..10");
@@ -175,6 +180,7 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
   std::shared_ptr<NonlinearShell> shell(new NonlinearShell());
   shell->model_ = model;
   shell->threads_ = threads;
+  shell->executor_ = executor ? std::move(executor) : default_executor();
   const ShellModel& m = *model;
   // The model's rule: the runs of quadrature points on one (face, sub-face), in the order K was
   // built.

@@ -25,6 +25,7 @@
 #include <Eigen/SparseCore>
 
 #include "softshell/engine/shell_model.h"
+#include "softshell/executor.h"
 
 namespace softshell::engine::internal {
 
@@ -47,19 +48,22 @@ struct ShellState {
 class NonlinearShell {
  public:
   /// Evaluates the basis at every quadrature point of `model` (the points and weights its K was
-  /// integrated with). `threads`: 0 = hardware concurrency. `jacobian_gauss_points` > 0 adds a
+  /// integrated with). The per-element work runs on `executor` (empty: softshell::default_executor()),
+  /// on at most `threads` of its threads (0 = all of them). `jacobian_gauss_points` > 0 adds a
   /// second, coarse rule (that many Gauss points per direction on every (sub-)face, no
   /// refinement) for `assemble_jacobian`: a tangent at the current state at a fraction of the
   /// cost, for the solver's linear solves (the residual always uses the model's rule).
   static std::shared_ptr<const NonlinearShell> build(std::shared_ptr<const ShellModel> model, int threads = 0,
-                                                     int jacobian_gauss_points = 0);
+                                                     int jacobian_gauss_points = 0,
+                                                     std::shared_ptr<Executor> executor = nullptr);
 
   const ShellModel& model() const { return *model_; }
   int32_t num_dofs() const { return model_->num_dofs(); }
   size_t num_points() const { return fine_.points; }
   size_t memory_bytes() const;
 
-  /// Worker threads for the per-element work (0 = hardware concurrency); small models use one.
+  /// At most this many of the executor's threads for the per-element work (0 = all); small models
+  /// use one.
   void set_threads(int threads) { threads_ = threads; }
 
   /// Evaluates the state at displacement `u` (3n). `with_pressure`: also the follower pressure
@@ -123,6 +127,9 @@ class NonlinearShell {
 
   std::shared_ptr<const ShellModel> model_;
   Rule fine_, coarse_;
+  int workers(int requested) const;  // threads to use for `requested` (0 = all)
+
+  std::shared_ptr<Executor> executor_;
   int threads_ = 0;
 };
 

@@ -15,7 +15,7 @@
 #include <cmath>
 #include <sstream>
 
-#include "constraint_rows.h"
+#include "problem.h"
 #include "factor_cache_impl.h"
 #include "kkt_operator.h"
 #include "krylov.h"
@@ -124,6 +124,7 @@ class Run {
   double first_step();
   Eigen::VectorXd predicted_path(const std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>>& history) const;
   bool solve_step(double lambda, double tolerance);
+  double check_answer(const Eigen::VectorXd& u);
   [[noreturn]] void give_up(double lambda, const std::string& why) const;
 
   std::shared_ptr<const ShellModel> model_;
@@ -133,7 +134,7 @@ class Run {
   Clock::time_point start_;
   Problem problem_;
   double pressure_ = 0.0;
-  std::vector<int32_t> pins_;
+  internal::Pins pins_;
   std::unique_ptr<internal::Reactions> reactions_;
   std::unique_ptr<internal::PrescribedPath> path_of_fixed_;
   Eigen::VectorXd u0_, r0_, d0_;
@@ -221,12 +222,12 @@ Eigen::VectorXd Run::tangent_times(const Eigen::VectorXd& v, double lambda) cons
 
 void Run::use_linear_factor() {
   const ShellModel& m = *model_;
-  FactorCache::Impl& cache = cache_.impl();
+  FactorCache::Impl& cache = internal::FactorCacheAccess::impl(cache_);
   bool hit = true;
   std::shared_ptr<const Factorization> factor = cache.find_subset(m.id(), problem_.fixed, 96);
   if (!factor) {
     factor = cache.get(m.id(), problem_.fixed,
-                       [&] { return std::make_shared<const Factorization>(m, problem_.fixed, pins_); }, hit);
+                       [&] { return std::make_shared<const Factorization>(m, problem_.fixed, pins_.dofs, pins_.motions); }, hit);
   }
   if (!hit) ++stats_.factorizations;
   factor_ = factor;
@@ -279,7 +280,7 @@ void Run::refresh_tangent() {
   auto try_factor = [&] {
     ++stats_.factorizations;
     try {
-      factor = std::make_shared<const Factorization>(*matrix, problem_.fixed, pins_, pattern);
+      factor = std::make_shared<const Factorization>(*matrix, problem_.fixed, pins_.dofs, pattern);
       return true;
     } catch (const internal::FactorizationFailed&) {
       return false;
@@ -441,6 +442,56 @@ bool Run::solve_step(double lambda, double tolerance) {
   }
 }
 
+// The safety net, as on the linear solver's answers: before an answer leaves, the state it
+// describes is checked against the request on its own terms (not the iteration's measure alone):
+// finite, the prescribed DOFs as asked, the out-of-balance force of the nonlinear equilibrium
+// (after the constraint reactions that best explain it) within the tolerance of the forces
+// acting, and every constraint row within the allowance the linear check gives it (a share of the
+// displacements, the geometry's round-off and the round-off of its terms). Returns the largest
+// ratio residual / allowance (<= 1); refuses the answer otherwise.
+double Run::check_answer(const Eigen::VectorXd& u) {
+  // The same allowances as the linear check (solver.cpp); the equilibrium's is a margin over the
+  // Newton tolerance, so that only a state that is not the converged one fails it.
+  constexpr double kConstraint = 1e-9, kGeometry = 1e-13, kRoundOff = 1e-12, kEquilibriumMargin = 10.0;
+  const std::string refused = "the nonlinear solve produced no accurate answer: ";
+  if (!u.allFinite()) fail(ErrorCode::kUnprocessable, refused + "the displacements are not finite");
+  ShellState checked;
+  const ShellState* s = &state_;
+  if (state_.displacement.size() != u.size() || state_.displacement != u) {
+    if (!evaluate(u, checked)) fail(ErrorCode::kUnprocessable, refused + "the answer folds the surface onto itself");
+    s = &checked;
+  }
+  double worst = 0.0;
+  const double equilibrium = reactions_->out_of_balance(residual(*s, 1.0)).norm() / force_scale(*s, 1.0);
+  worst = std::max(worst, equilibrium / (kEquilibriumMargin * options_.tolerance));
+  if (!(worst <= 1.0)) {
+    fail(ErrorCode::kUnprocessable, refused + "the out-of-balance force is " + scientific(equilibrium) +
+                                        " of the forces acting (allowed " +
+                                        scientific(kEquilibriumMargin * options_.tolerance) + ")");
+  }
+  Vec3 lo, hi;
+  model_->mesh().bounding_box(lo, hi);
+  const double size = std::max({(hi - lo).norm(), lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff()});
+  double displacement_scale = u.cwiseAbs().maxCoeff();
+  for (const Row& row : problem_.rows) displacement_scale = std::max(displacement_scale, std::abs(row.rhs) / row.scale);
+  for (const Row& row : problem_.rows) {
+    double lhs = 0.0, terms = std::abs(row.rhs);
+    for (const auto& [dof, coef] : row.terms) {
+      lhs += coef * u[dof];
+      terms += std::abs(coef * u[dof]);
+    }
+    const double residual = std::abs(lhs - row.rhs);
+    const double allowed = row.scale * (kConstraint * displacement_scale + kGeometry * size) + kRoundOff * terms;
+    worst = std::max(worst, residual / allowed);
+    if (!(residual <= allowed)) {
+      fail(ErrorCode::kUnprocessable, refused + row.source + " is off by " + internal::format_number(residual) +
+                                          " (displacements of " + internal::format_number(displacement_scale) +
+                                          "); the constraints may contradict each other");
+    }
+  }
+  return worst;
+}
+
 void Run::give_up(double lambda, const std::string& why) const {
   std::string message = "the nonlinear model could not bring the shell to equilibrium: ";
   message += lambda > 0.0 ? "it reached " + percent(lambda) + " of the requested loads and displacements (" + why + ")"
@@ -475,7 +526,7 @@ NonlinearSolution Run::run() {
   const NonlinearMemory* mem = memory_in_.get();
   const bool at_rest = u0_.isZero(0.0);
   const bool continues = mem && mem->end.size() == ndof && mem->end == u0_;
-  if (mem && !at_rest && mem->fixed == problem_.fixed && mem->factor && mem->factor->pinned() == pins_ &&
+  if (mem && !at_rest && mem->fixed == problem_.fixed && mem->factor && mem->factor->pinned() == pins_.dofs &&
       !mem->factor_is_k) {
     factor_ = mem->factor;
     matrix_ = mem->matrix;
@@ -531,11 +582,12 @@ NonlinearSolution Run::run() {
     if (!evaluate(u_, state_)) give_up(lambda, "internal error: a converged state became invalid");
     fresh_ = false;
   }
-  internal::check_solution(problem_, u_, length_);
   NonlinearSolution solution;
   solution.displacement = u_;
   for (int32_t dof : problem_.fixed) solution.displacement[dof] = problem_.fixed_value[dof];
+  const double check_ratio = check_answer(solution.displacement);
   solution.stats = stats_;
+  solution.stats.check_ratio = check_ratio;
   solution.stats.residual = last_residual_;
   solution.stats.strain_energy = state_.energy;
   solution.stats.solve_ms = ms_between(start_, Clock::now());
@@ -574,7 +626,7 @@ NonlinearSolver::~NonlinearSolver() = default;
 
 std::shared_ptr<const internal::NonlinearShell> NonlinearSolver::shell() const {
   std::lock_guard lock(mutex_);
-  if (!shell_) shell_ = internal::NonlinearShell::build(model_, options_.threads, options_.tangent_gauss_points);
+  if (!shell_) shell_ = internal::NonlinearShell::build(model_, options_.threads, options_.tangent_gauss_points, options_.executor);
   return shell_;
 }
 

@@ -335,24 +335,8 @@ struct HttpServer::Impl {
     routes.emplace_back(std::regex(pattern), "POST");
   }
 
-  // An exception from a handler as the error to answer with (bugs are logged).
-  Error describe(std::exception_ptr ep) const {
-    try {
-      std::rethrow_exception(ep);
-    } catch (const Exception& e) {
-      if (e.code() == ErrorCode::kInternal) options.logger.error(std::string("handler failed: ") + e.what());
-      return e.error();
-    } catch (const std::bad_alloc&) {
-      options.logger.error("handler ran out of memory");
-      return Error{ErrorCode::kResourceExhausted, "the server ran out of memory while handling this request"};
-    } catch (const std::exception& e) {
-      options.logger.error(std::string("handler failed: ") + e.what());
-      return Error{ErrorCode::kInternal, std::string("internal error: ") + e.what()};
-    } catch (...) {
-      options.logger.error("handler failed with an unknown exception");
-      return Error{ErrorCode::kInternal, "internal error"};
-    }
-  }
+  // An exception from a handler as the error to answer with (bugs go to the SDK log sink).
+  static Error describe(std::exception_ptr ep) { return error_from(std::move(ep), "handling this request"); }
 
   // Errors cpp-httplib produces itself (no route, body too large, malformed request) get the
   // JSON error layout too. Errors our handlers set already have a body.

@@ -16,6 +16,9 @@
 
 #include "softshell/content_id.h"
 #include "softshell/mesh_validation.h"
+#include "softshell/request_validation.h"
+#include "softshell/tessellation.h"
+#include "softshell/engine/stresses.h"
 #include "softshell/wire.h"
 #include "task_pool.h"
 
@@ -119,18 +122,14 @@ Result<void> check_namespace(std::string_view ns) {
   return {};
 }
 
-// Runs `fn` (which returns a Result) and turns anything it throws into an error.
-template <class Fn>
-auto guarded(Fn&& fn) -> decltype(fn()) {
-  try {
-    return fn();
-  } catch (const Exception& e) {
-    return e.error();
-  } catch (const std::bad_alloc&) {
-    return Error{ErrorCode::kResourceExhausted, "out of memory"};
-  } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal, std::string("internal error: ") + e.what()};
+// Stress query points must lie on the limit surface; the message names the first that does not.
+Result<void> validate_points(const std::vector<SurfacePoint>& points, const LimitEvaluator& evaluator) {
+  for (size_t k = 0; k < points.size(); ++k) {
+    if (auto ok = evaluator.check(points[k]); !ok) {
+      return Error{ErrorCode::kInvalidArgument, "stress point " + std::to_string(k) + ": " + ok.error().message};
+    }
   }
+  return {};
 }
 
 Error not_found(const GeomId& id) {
@@ -210,7 +209,7 @@ struct Service::Impl {
       ControlMesh smooth = e.geometry->mesh;
       smooth.creases().clear();
       smooth.corners().clear();
-      auto created = guarded([&] { return LimitEvaluator::create(smooth, options.precompute.evaluator); });
+      auto created = capture([&] { return LimitEvaluator::create(smooth, options.precompute.evaluator); });
       if (created) e.evaluator = std::move(*created);
       else e.evaluator_error = created.error();
     }
@@ -233,7 +232,7 @@ struct Service::Impl {
       opts.cancel = &stopping;
       precomputing_now.fetch_add(1);
       const auto start = Clock::now();
-      auto model = guarded([&] { return engine::ShellModel::build(g.mesh, g.material, opts); });
+      auto model = capture([&] { return engine::ShellModel::build(g.mesh, g.material, opts); });
       const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
       precomputing_now.fetch_sub(1);
       if (model && !*model) model = Error{ErrorCode::kInternal, "the precomputation returned no model"};
@@ -289,7 +288,7 @@ struct Service::Impl {
         return;
       }
       const auto start = Clock::now();
-      auto solution = guarded([&] { return solver->solve(request); });
+      auto solution = capture([&] { return solver->solve(request); });
       if (!solution) {
         solves_failed.fetch_add(1);
         Error err = solution.error();
@@ -386,7 +385,7 @@ void Service::shutdown() {
 }
 
 Result<UploadResult> Service::upload(ControlMesh mesh, Material material, std::string name_space) {
-  return guarded([&] { return upload_checked(std::move(mesh), material, std::move(name_space)); });
+  return capture([&] { return upload_checked(std::move(mesh), material, std::move(name_space)); });
 }
 
 Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& material, std::string name_space) {
@@ -400,7 +399,7 @@ Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& m
   if (auto e = impl_->find(id)) return existing(*e);
 
   // New content: validate before storing anything.
-  if (auto ok = guarded([&] { return validate_mesh(mesh); }); !ok) return ok.error();
+  if (auto ok = capture([&] { return validate_mesh(mesh); }); !ok) return ok.error();
   if (auto ok = material.check(); !ok) return ok.error();
   const size_t bytes = mesh_bytes(mesh) + model_estimate(mesh);
 
@@ -464,26 +463,18 @@ void Service::deform(const GeomId& id, DeformationRequest request, DeformCallbac
   if (impl_->stopping.load()) return done(shutdown_error());
   auto e = impl_->find(id);
   if (!e) return done(not_found(id));
-  if (auto ok = wire::validate_request(request, e->geometry->mesh.num_vertices()); !ok) return done(ok.error());
-
-  // Surface points are checked against the limit surface now, not after the precomputation.
-  if (!request.limit_constraints.empty() || !request.surface_forces.empty()) {
-    auto evaluator = impl_->evaluator(*e);
-    if (!evaluator) return done(evaluator.error());
-    auto check = [&](const SurfacePoint& p, const std::string& name) -> Result<void> {
-      if (auto ok = evaluator->check(p); !ok) return Error{ErrorCode::kInvalidArgument, name + ": " + ok.error().message};
-      return {};
-    };
-    for (size_t k = 0; k < request.limit_constraints.size(); ++k) {
-      if (auto ok = check(request.limit_constraints[k].point, "limit constraint " + std::to_string(k)); !ok) {
-        return done(ok.error());
-      }
+  {
+    // The one validation of a request; surface points are checked against the limit surface now,
+    // not after the precomputation.
+    RequestContext context{e->geometry->mesh.num_vertices(), nullptr};
+    std::optional<LimitEvaluator> evaluator;
+    if (!request.limit_constraints.empty() || !request.surface_forces.empty()) {
+      auto made = impl_->evaluator(*e);
+      if (!made) return done(made.error());
+      evaluator = std::move(*made);
+      context.evaluator = &*evaluator;
     }
-    for (size_t k = 0; k < request.surface_forces.size(); ++k) {
-      if (auto ok = check(request.surface_forces[k].point, "surface force " + std::to_string(k)); !ok) {
-        return done(ok.error());
-      }
-    }
+    if (auto ok = validate_request(request, context); !ok) return done(ok.error());
   }
 
   std::unique_lock lock(e->mu);
@@ -535,6 +526,51 @@ Result<ResultPtr> Service::result(const GeomId& id, uint32_t res_id) const {
   return e->results[res_id - 1];
 }
 
+Result<StressField> Service::stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) const {
+  if (query.level != 0 && (query.level < 1 || query.level > StressQuery::kMaxLevel)) {
+    return Error{ErrorCode::kInvalidArgument, "stresses: level " + std::to_string(query.level) +
+                                                  " is outside 1.." + std::to_string(StressQuery::kMaxLevel)};
+  }
+  if (!(query.yield_strength >= 0.0) || !std::isfinite(query.yield_strength)) {
+    return Error{ErrorCode::kInvalidArgument, "stresses: the yield strength must be a finite number >= 0 (Pa)"};
+  }
+  if (query.level == 0 && query.points.size() > StressQuery::kMaxPoints) {
+    return Error{ErrorCode::kInvalidArgument, "stresses: " + std::to_string(query.points.size()) +
+                                                  " points asked for, at most " +
+                                                  std::to_string(StressQuery::kMaxPoints) + " are served at once"};
+  }
+  auto stored = result(id, res_id);
+  if (!stored) return stored.error();
+  std::shared_ptr<const engine::ShellModel> model;
+  {
+    auto e = impl_->find(id);
+    std::lock_guard lock(e->mu);
+    model = e->model;  // a stored result implies a finished precomputation
+  }
+  if (!model) return Error{ErrorCode::kInternal, "stresses: geometry " + id.hex() + " has results but no model"};
+  return capture([&] {
+    const ControlMesh& mesh = model->mesh();
+    Eigen::VectorXd u(model->num_dofs());
+    for (int32_t i = 0; i < mesh.num_vertices(); ++i) {
+      u.segment<3>(3 * i) = (*stored)->positions[static_cast<size_t>(i)] - mesh.positions()[static_cast<size_t>(i)];
+    }
+    StressField field;
+    field.res_id = res_id;
+    field.yield_strength = query.yield_strength;
+    const engine::StressSummary summary = engine::max_stress(*model, u, field.yield_strength);
+    field.max = summary.max;
+    field.exceeds_yield = field.yield_strength > 0.0 && summary.exceeds_yield;
+    if (query.level > 0) {
+      const Tessellation tessellation = Tessellation::create(model->evaluator(), query.level).value();
+      field.samples = engine::evaluate_stresses(*model, u, tessellation.vertex_points());
+    } else {
+      if (auto ok = validate_points(query.points, model->evaluator()); !ok) return Result<StressField>(ok.error());
+      field.samples = engine::evaluate_stresses(*model, u, query.points);
+    }
+    return Result<StressField>(std::move(field));
+  }, "computing stresses");
+}
+
 Result<ResultPtr> Service::latest_result(const GeomId& id, uint32_t have, std::chrono::milliseconds wait,
                                          std::stop_token stop) const {
   auto e = impl_->find(id);
@@ -568,7 +604,7 @@ Result<LimitComb> Service::limit_comb(const GeomId& id, const SurfacePoint& poin
   auto evaluator = impl_->evaluator(*e);
   if (!evaluator) return evaluator.error();
   if (auto ok = evaluator->check(point); !ok) return ok.error();
-  return guarded([&]() -> Result<LimitComb> {
+  return capture([&]() -> Result<LimitComb> {
     LimitStencil s = evaluator->stencil(point);
     return LimitComb{point, std::move(s.indices), std::move(s.position), std::move(s.du), std::move(s.dv)};
   });

@@ -12,6 +12,7 @@
 #include "softshell/deformation.h"
 #include "softshell/engine/factor_cache.h"
 #include "softshell/engine/shell_model.h"
+#include "softshell/executor.h"
 #include "softshell/result.h"
 
 namespace softshell::engine {
@@ -31,7 +32,10 @@ struct NonlinearOptions {
   /// Load steps: a request the solver cannot bring to equilibrium in one step is approached in
   /// smaller ones, at most this many, none smaller than 1/1024 of the whole.
   int max_load_steps = 64;
-  /// Worker threads for the internal forces and tangents (0 = hardware concurrency).
+  /// Where the internal forces and tangents are computed (the host's threads); empty =
+  /// softshell::default_executor().
+  std::shared_ptr<Executor> executor;
+  /// At most this many of the executor's threads work on one solve (0 = all of them).
   int threads = 0;
   /// Gauss points per direction on each (sub-)face of the rule the preconditioner's tangent is
   /// integrated with (0: the model's own rule). The Newton directions always use the exact
@@ -48,6 +52,9 @@ struct NonlinearStats {
   int32_t krylov_iterations = 0;  ///< GMRES iterations (each one tangent product and one solve)
   int32_t factorizations = 0;     ///< tangent stiffness factorizations
   double residual = 0.0;          ///< final relative out-of-balance force (< tolerance)
+  /// The answer's check (the safety net): the largest residual / allowance over the nonlinear
+  /// equilibrium and every constraint row (<= 1; an answer that fails it is refused).
+  double check_ratio = 0.0;
   double strain_energy = 0.0;     ///< J
   double solve_ms = 0.0;          ///< total
   double evaluate_ms = 0.0;       ///< of which evaluating internal forces

@@ -29,6 +29,7 @@
 #include "softshell/service/log.h"
 #include "softshell/service/metrics.h"
 #include "softshell/session.h"
+#include "softshell/stresses.h"
 
 namespace softshell::service {
 
@@ -142,6 +143,11 @@ class Service {
   /// The limit point and tangents at `point` as combinations of control points (available
   /// while the geometry is still precomputing). kInvalidArgument for a bad point.
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) const;
+
+  /// Stresses of a stored result (softshell/stresses.h), computed on the calling thread:
+  /// kNotFound for an unknown geometry or result, kInvalidArgument for a bad query (level outside
+  /// 1..4, too many points, a point not on the surface).
+  Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) const;
 
   ServiceStats stats() const;
   const ServiceOptions& options() const { return options_; }
