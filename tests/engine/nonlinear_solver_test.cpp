@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "softshell/engine/solver.h"
+#include "solver_testing.h"
 #include "test_meshes.h"
 
 namespace softshell::engine {
@@ -182,6 +183,58 @@ TEST(NonlinearSolver, RefusesWhatItCannotBringToEquilibrium) {
   auto bad = solver.solve(request, Eigen::VectorXd::Zero(5));
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.error().code, ErrorCode::kInvalidArgument);
+}
+
+// The safety net on nonlinear answers: a converged answer passes its check (ratio <= 1, reported);
+// an answer corrupted just before the check (as a wrong state or a lost constraint would leave
+// it) is refused with a message saying what is off, never returned.
+TEST(NonlinearSolver, EveryAnswerIsCheckedBeforeItLeaves) {
+  Cantilever c;
+  auto model = ShellModel::build(c.mesh, material()).value();
+  NonlinearSolver solver(model, std::make_shared<FactorCache>());
+  DeformationRequest request;
+  request.vertex_constraints = c.clamp();
+  request.surface_forces.push_back({c.tip(), Vec3(0.0, 0.0, -5.0)});
+  const SurfacePoint side{8 * 2 - 1, 0, 1.0, 1.0};
+  request.limit_constraints.push_back({side, Vec3(0.0, 0.0, -0.05), {}, {}});
+  auto good = solver.solve(request);
+  ASSERT_TRUE(good.ok()) << good.error().message;
+  EXPECT_GT(good->stats.check_ratio, 0.0);
+  EXPECT_LE(good->stats.check_ratio, 1.0);
+
+  struct Hook {
+    explicit Hook(internal::FastPathCorruption f) { internal::g_corrupt_nonlinear_answer.store(f); }
+    ~Hook() { internal::g_corrupt_nonlinear_answer.store(nullptr); }
+  };
+  {
+    // A free control point moved by 1e-4 of the size: out of equilibrium.
+    Hook hook([](Eigen::VectorXd& u) { u[3 * test::grid_index(8, 4, 2) + 2] += 4e-5; });
+    auto bad = solver.solve(request);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.error().code, ErrorCode::kUnprocessable);
+    EXPECT_NE(bad.error().message.find("out-of-balance"), std::string::npos) << bad.error().message;
+  }
+  {
+    // A clamped control point moved.
+    Hook hook([](Eigen::VectorXd& u) { u[3 * test::grid_index(8, 0, 2) + 2] += 1e-9; });
+    auto bad = solver.solve(request);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.error().code, ErrorCode::kUnprocessable);
+    EXPECT_NE(bad.error().message.find("vertex constraint"), std::string::npos) << bad.error().message;
+  }
+  {
+    // Every free control point moved rigidly by 1e-6 of the length in z: hardly any strain, but
+    // the limit constraint is off (checked first).
+    Hook hook([](Eigen::VectorXd& u) {
+      for (int j = 0; j <= 4; ++j) {
+        for (int i = 2; i <= 8; ++i) u[3 * test::grid_index(8, i, j) + 2] += 4e-7;
+      }
+    });
+    auto bad = solver.solve(request);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.error().code, ErrorCode::kUnprocessable);
+    EXPECT_NE(bad.error().message.find("limit constraint"), std::string::npos) << bad.error().message;
+  }
 }
 
 }  // namespace

@@ -21,9 +21,12 @@
 #include "krylov.h"
 #include "load_path.h"
 #include "nonlinear_shell.h"
+#include "solver_testing.h"
 
 namespace softshell::engine {
 namespace internal {
+
+std::atomic<FastPathCorruption> g_corrupt_nonlinear_answer{nullptr};
 
 // What a solve leaves for the next one that starts from its answer (the next step of a drag).
 struct NonlinearMemory {
@@ -455,6 +458,12 @@ double Run::check_answer(const Eigen::VectorXd& u) {
   constexpr double kConstraint = 1e-9, kGeometry = 1e-13, kRoundOff = 1e-12, kEquilibriumMargin = 10.0;
   const std::string refused = "the nonlinear solve produced no accurate answer: ";
   if (!u.allFinite()) fail(ErrorCode::kUnprocessable, refused + "the displacements are not finite");
+  for (int32_t dof : problem_.fixed) {
+    if (u[dof] != problem_.fixed_value[dof]) {
+      fail(ErrorCode::kUnprocessable, refused + "control point " + std::to_string(dof / 3) + " (" +
+                                          internal::axis_name(dof % 3) + ") is not where its vertex constraint puts it");
+    }
+  }
   ShellState checked;
   const ShellState* s = &state_;
   if (state_.displacement.size() != u.size() || state_.displacement != u) {
@@ -462,13 +471,6 @@ double Run::check_answer(const Eigen::VectorXd& u) {
     s = &checked;
   }
   double worst = 0.0;
-  const double equilibrium = reactions_->out_of_balance(residual(*s, 1.0)).norm() / force_scale(*s, 1.0);
-  worst = std::max(worst, equilibrium / (kEquilibriumMargin * options_.tolerance));
-  if (!(worst <= 1.0)) {
-    fail(ErrorCode::kUnprocessable, refused + "the out-of-balance force is " + scientific(equilibrium) +
-                                        " of the forces acting (allowed " +
-                                        scientific(kEquilibriumMargin * options_.tolerance) + ")");
-  }
   Vec3 lo, hi;
   model_->mesh().bounding_box(lo, hi);
   const double size = std::max({(hi - lo).norm(), lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff()});
@@ -486,8 +488,15 @@ double Run::check_answer(const Eigen::VectorXd& u) {
     if (!(residual <= allowed)) {
       fail(ErrorCode::kUnprocessable, refused + row.source + " is off by " + internal::format_number(residual) +
                                           " (displacements of " + internal::format_number(displacement_scale) +
-                                          "); the constraints may contradict each other");
+                                          ")");
     }
+  }
+  const double equilibrium = reactions_->out_of_balance(residual(*s, 1.0)).norm() / force_scale(*s, 1.0);
+  worst = std::max(worst, equilibrium / (kEquilibriumMargin * options_.tolerance));
+  if (!(worst <= 1.0)) {
+    fail(ErrorCode::kUnprocessable, refused + "the out-of-balance force is " + scientific(equilibrium) +
+                                        " of the forces acting (allowed " +
+                                        scientific(kEquilibriumMargin * options_.tolerance) + ")");
   }
   return worst;
 }
@@ -585,6 +594,7 @@ NonlinearSolution Run::run() {
   NonlinearSolution solution;
   solution.displacement = u_;
   for (int32_t dof : problem_.fixed) solution.displacement[dof] = problem_.fixed_value[dof];
+  if (auto corrupt = internal::g_corrupt_nonlinear_answer.load()) corrupt(solution.displacement);
   const double check_ratio = check_answer(solution.displacement);
   solution.stats = stats_;
   solution.stats.check_ratio = check_ratio;
