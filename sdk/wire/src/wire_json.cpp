@@ -226,6 +226,12 @@ GeomId geom_id(const json& j, const std::string& path) {
   return *id;
 }
 
+DeformationModel deformation_model(const json& j, const std::string& path) {
+  auto model = parse_deformation_model(text(j, path));
+  if (!model) bad(where(path) + ": " + model.error().message);
+  return *model;
+}
+
 SurfacePoint surface_point(const json& obj, const std::string& path, std::string_view face_key) {
   SurfacePoint p;
   p.face = index(require(obj, face_key, path), join(path, face_key));
@@ -536,6 +542,7 @@ std::string encode_request_json(const DeformationRequest& request) {
   }
   if (!request.surface_load.isZero(0.0)) out.raw(",\"surface_load\":").vec3(request.surface_load);
   if (request.pressure != 0.0) out.raw(",\"pressure\":").number(request.pressure);
+  if (request.model == DeformationModel::kNonlinear) out.raw(",\"model\":\"nonlinear\"");
   out.raw("}");
   return out.take();
 }
@@ -546,7 +553,7 @@ Result<DeformationRequest> decode_request_json(std::string_view body) {
     object(root, "");
     known_keys(root,
                {"vertex_constraints", "lagrange_constraints", "forces", "limit_constraints", "surface_forces",
-                "surface_load", "pressure"},
+                "surface_load", "pressure", "model"},
                "");
     DeformationRequest r;
     if (const json* list = find(root, "vertex_constraints")) {
@@ -636,6 +643,7 @@ Result<DeformationRequest> decode_request_json(std::string_view body) {
     }
     if (const json* q = find(root, "surface_load")) r.surface_load = vec3(*q, "surface_load");
     if (const json* p = find(root, "pressure")) r.pressure = number(*p, "pressure");
+    if (const json* m = find(root, "model")) r.model = deformation_model(*m, "model");
     return r;
   });
 }
@@ -646,7 +654,12 @@ Result<DeformationRequest> decode_request_json(std::string_view body) {
 std::string encode_result_json(const DeformationResult& result) {
   JsonOut out;
   out.raw("{\"res_id\":").integer(result.res_id).raw(",\"positions\":");
-  out.array(result.positions, [&](const Vec3& p) { out.vec3(p); }).raw("}");
+  out.array(result.positions, [&](const Vec3& p) { out.vec3(p); });
+  if (result.model == DeformationModel::kNonlinear) {
+    out.raw(",\"model\":\"nonlinear\",\"iterations\":").integer(result.iterations);
+    out.raw(",\"residual\":").number(result.residual);
+  }
+  out.raw("}");
   return out.take();
 }
 
@@ -664,6 +677,11 @@ Result<DeformationResult> decode_result_json(std::string_view body, std::optiona
     }
     r.positions.reserve(pos.size());
     for (size_t i = 0; i < pos.size(); ++i) r.positions.push_back(vec3(pos[i], item("positions", i)));
+    if (const json* m = find(root, "model")) r.model = deformation_model(*m, "model");
+    if (const json* k = find(root, "iterations")) {
+      r.iterations = static_cast<int32_t>(integer(*k, "iterations", 0, std::numeric_limits<int32_t>::max()));
+    }
+    if (const json* q = find(root, "residual")) r.residual = number(*q, "residual");
     return r;
   });
 }
@@ -897,6 +915,13 @@ Result<GeometryStatus> parse_geometry_status(std::string_view name) {
   if (name == "failed") return GeometryStatus::kFailed;
   return Error{ErrorCode::kInvalidArgument,
                "unknown geometry status '" + std::string(name.substr(0, 40)) + "' (precomputing, ready, failed)"};
+}
+
+Result<DeformationModel> parse_deformation_model(std::string_view name) {
+  if (name == "linear") return DeformationModel::kLinear;
+  if (name == "nonlinear") return DeformationModel::kNonlinear;
+  return Error{ErrorCode::kInvalidArgument,
+               "unknown model '" + std::string(name.substr(0, 40)) + "'; the models are linear and nonlinear"};
 }
 
 }  // namespace softshell::wire

@@ -80,8 +80,21 @@ constexpr double kZeroEnergyResidual = 1e-11;
 Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
                              const Eigen::MatrixXd& motions)
     : id_(g_next_factor_id++), fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
+  factorize(model.stiffness(), nullptr, motions);
+}
+
+Factorization::Factorization(const Eigen::SparseMatrix<double>& k, std::vector<int32_t> fixed,
+                             std::vector<int32_t> pinned, const Factorization* same_pattern)
+    : id_(g_next_factor_id++), fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
+  if (same_pattern && (same_pattern->fixed_ != fixed_ || same_pattern->pinned_ != pinned_ || !same_pattern->factor_)) {
+    same_pattern = nullptr;
+  }
+  factorize(k, same_pattern, Eigen::MatrixXd());
+}
+
+void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern,
+                              const Eigen::MatrixXd& motions) {
   const auto start = std::chrono::steady_clock::now();
-  const Eigen::SparseMatrix<double>& k = model.stiffness();
   const auto n = static_cast<size_t>(k.rows());
   position_.assign(n, -1);
   std::vector<char> excluded(n, 0);
@@ -94,7 +107,7 @@ Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed
     }
   }
   if (factored_.empty()) {  // everything fixed (or pinned): nothing to factor
-    compute_pin_block(model, motions);
+    compute_pin_block(k, motions);
     return;
   }
 
@@ -131,7 +144,10 @@ Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed
   bool ok = false;
   {
     const auto turn = blas_turn();
-    l = cholmod_analyze(a, c);
+    // A copy of a factor of the same pattern carries its ordering and supernodes: factorizing
+    // into it skips the analysis (the larger share of a small model's factorization).
+    l = same_pattern ? cholmod_copy_factor(reinterpret_cast<cholmod_factor*>(same_pattern->factor_), c)
+                     : cholmod_analyze(a, c);
     ok = l && cholmod_factorize(a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
   }
   const size_t minor = l ? l->minor : 0;
@@ -160,14 +176,13 @@ Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed
                        : l->nzmax * (sizeof(double) + int_size);
   bytes_ += 4 * l->n * int_size + n * sizeof(int32_t) + factored_.size() * sizeof(int32_t) +
             supernode_of_.size() * sizeof(int32_t);
-  compute_pin_block(model, motions);
+  compute_pin_block(k, motions);
   bytes_ += static_cast<size_t>(pin_columns_.size() + pin_block_.size()) * sizeof(double) +
             pin_position_.size() * sizeof(int32_t);
   factor_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-void Factorization::compute_pin_block(const ShellModel& model, const Eigen::MatrixXd& motions) {
-  const Eigen::SparseMatrix<double>& k = model.stiffness();
+void Factorization::compute_pin_block(const Eigen::SparseMatrix<double>& k, const Eigen::MatrixXd& motions) {
   const auto na = static_cast<Eigen::Index>(factored_.size());
   const auto nq = static_cast<Eigen::Index>(pinned_.size());
   Eigen::MatrixXd kaq = Eigen::MatrixXd::Zero(na, nq);

@@ -34,6 +34,13 @@ class Factorization {
   /// FactorizationFailed if that matrix is not positive definite.
   Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
                 const Eigen::MatrixXd& motions);
+  /// The same for another symmetric matrix with K's sparsity pattern (full, both triangles; e.g.
+  /// a tangent stiffness of the nonlinear shell, which carries no exact zero-energy motions, so
+  /// its pin block is kept as computed). With `same_pattern` (a factor of a matrix with this
+  /// pattern and the same fixed and pinned DOFs) its symbolic analysis is reused: only the
+  /// numeric factorization runs.
+  Factorization(const Eigen::SparseMatrix<double>& k, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
+                const Factorization* same_pattern = nullptr);
   ~Factorization();
   Factorization(const Factorization&) = delete;
   Factorization& operator=(const Factorization&) = delete;
@@ -75,12 +82,14 @@ class Factorization {
   Eigen::MatrixXd backward(const Eigen::MatrixXd& y) const;
 
  private:
+  void factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern);
   Eigen::MatrixXd apply(int system, const Eigen::MatrixXd& rhs) const;
   // The forward sweep over the supernodes reachable from the nonzero rows of P B, if that is at
   // most half of the factor; false (and `x` untouched) otherwise.
   bool sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read) const;
 
-  void compute_pin_block(const ShellModel& model, const Eigen::MatrixXd& motions);
+  void factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern, const Eigen::MatrixXd& motions);
+  void compute_pin_block(const Eigen::SparseMatrix<double>& k, const Eigen::MatrixXd& motions);
 
   uint64_t id_ = 0;
   std::vector<int32_t> fixed_, pinned_, factored_, position_, pin_position_;

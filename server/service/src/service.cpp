@@ -18,6 +18,7 @@
 #include "softshell/mesh_validation.h"
 #include "softshell/request_validation.h"
 #include "softshell/tessellation.h"
+#include "softshell/engine/nonlinear_stresses.h"
 #include "softshell/engine/stresses.h"
 #include "softshell/wire.h"
 #include "task_pool.h"
@@ -152,6 +153,8 @@ struct Entry {
   size_t reserved_bytes = 0;  // mesh + model (estimate until built)
   std::shared_ptr<const engine::ShellModel> model;
   std::shared_ptr<const engine::Solver> solver;
+  // The nonlinear model's solver (its quadrature basis is built by its first solve).
+  std::shared_ptr<const engine::NonlinearSolver> nonlinear;
   std::vector<ResultPtr> results;  // results[k] has res_id k + 1
   std::vector<Pending> pending;    // requests waiting for the precomputation
 
@@ -251,6 +254,7 @@ struct Service::Impl {
         e->model = std::move(*model);
         solver = std::make_shared<const engine::Solver>(e->model, cache);
         e->solver = solver;
+        e->nonlinear = std::make_shared<const engine::NonlinearSolver>(e->model, cache);
         precompute_hist.observe(seconds);  // before the status is visible: stats never lag it
         e->status = GeometryStatus::kReady;
         const size_t actual = mesh_bytes(e->geometry->mesh) + e->model->memory_bytes();
@@ -288,18 +292,35 @@ struct Service::Impl {
         return;
       }
       const auto start = Clock::now();
-      auto solution = capture([&] { return solver->solve(request); });
-      if (!solution) {
+      auto stored = std::make_shared<StoredResult>();
+      // Each model's answer passed its engine's check (equilibrium and every constraint).
+      Result<Eigen::VectorXd> displacement = capture([&]() -> Result<Eigen::VectorXd> {
+        if (request.model == DeformationModel::kNonlinear) {
+          std::shared_ptr<const engine::NonlinearSolver> nonlinear;
+          {
+            std::lock_guard lock(e->mu);
+            nonlinear = e->nonlinear;
+          }
+          auto answer = nonlinear->solve(request);  // from rest: a request is solved alone
+          if (!answer) return answer.error();
+          stored->nonlinear = answer->stats;
+          return std::move(answer->displacement);
+        }
+        auto answer = solver->solve(request);
+        if (!answer) return answer.error();
+        stored->stats = answer->stats;
+        return std::move(answer->displacement);
+      });
+      if (!displacement) {
         solves_failed.fetch_add(1);
-        Error err = solution.error();
+        Error err = displacement.error();
         if (err.code == ErrorCode::kCancelled) err.code = ErrorCode::kUnavailable;
         if (err.code == ErrorCode::kInternal) options.logger.error("solve failed: " + err.message);
         done(std::move(err));
         return;
       }
       const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-      auto stored = std::make_shared<StoredResult>();
-      stored->positions = solution->positions(e->geometry->mesh);
+      stored->positions = engine::Solution{*displacement, {}}.positions(e->geometry->mesh);
       for (const Vec3& p : stored->positions) {
         if (!p.allFinite()) {
           solves_failed.fetch_add(1);
@@ -309,7 +330,6 @@ struct Service::Impl {
           return;
         }
       }
-      stored->stats = solution->stats;
       stored->request = std::move(request);
       const size_t bytes = sizeof(StoredResult) + stored->positions.size() * sizeof(Vec3) + request_bytes(stored->request);
       bool fits = false;
@@ -526,6 +546,41 @@ Result<ResultPtr> Service::result(const GeomId& id, uint32_t res_id) const {
   return e->results[res_id - 1];
 }
 
+namespace {
+
+// The stresses of a result of the nonlinear model: the Cauchy (true) resultants of the deformed
+// surface from its Green-Lagrange strains, in the layout of the linear ones (a linear evaluation
+// of a large displacement would show the strains of the rotation).
+StressSample from_nonlinear(const engine::ShellModel& model, const engine::NonlinearStressSample& n) {
+  StressSample s;
+  s.point = n.point;
+  s.position = model.evaluator().evaluate(n.point).position;  // rest position, as the linear samples
+  s.membrane_force = n.cauchy_membrane_force;
+  s.bending_moment = n.cauchy_bending_moment;
+  s.von_mises_top = n.von_mises_top;
+  s.von_mises_bottom = n.von_mises_bottom;
+  return s;
+}
+
+Result<StressField> nonlinear_stresses(const engine::ShellModel& model, const Eigen::VectorXd& u,
+                                       const StressQuery& query, StressField field) {
+  const engine::NonlinearStressSummary summary = engine::nonlinear_max_stress(model, u, field.yield_strength);
+  field.max = from_nonlinear(model, summary.max);
+  field.exceeds_yield = field.yield_strength > 0.0 && summary.exceeds_yield;
+  std::vector<SurfacePoint> points;
+  if (query.level > 0) {
+    points = Tessellation::create(model.evaluator(), query.level).value().vertex_points();
+  } else {
+    if (auto ok = validate_points(query.points, model.evaluator()); !ok) return ok.error();
+    points = query.points;
+  }
+  field.samples.reserve(points.size());
+  for (const SurfacePoint& p : points) field.samples.push_back(from_nonlinear(model, engine::evaluate_nonlinear_stress(model, u, p)));
+  return field;
+}
+
+}  // namespace
+
 Result<StressField> Service::stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) const {
   if (query.level != 0 && (query.level < 1 || query.level > StressQuery::kMaxLevel)) {
     return Error{ErrorCode::kInvalidArgument, "stresses: level " + std::to_string(query.level) +
@@ -557,6 +612,7 @@ Result<StressField> Service::stresses(const GeomId& id, uint32_t res_id, const S
     StressField field;
     field.res_id = res_id;
     field.yield_strength = query.yield_strength;
+    if ((*stored)->nonlinear) return nonlinear_stresses(*model, u, query, std::move(field));
     const engine::StressSummary summary = engine::max_stress(*model, u, field.yield_strength);
     field.max = summary.max;
     field.exceeds_yield = field.yield_strength > 0.0 && summary.exceeds_yield;

@@ -137,7 +137,8 @@ Result<DeformationRequest> decode_request_binary(std::string_view body);
 /// default zero), `lagrange_constraints` (`indices`, `coefficients`, `values`), `forces`
 /// (`index`, `force`) and the extensions `limit_constraints` (`face`, `subface` default 0, `u`,
 /// `v`, `displacement`, optional `du_displacement`, `dv_displacement`), `surface_forces`
-/// (`face`, `subface`, `u`, `v`, `force`), `surface_load` and `pressure`. Every field optional.
+/// (`face`, `subface`, `u`, `v`, `force`), `surface_load`, `pressure` and `model` ("linear",
+/// "nonlinear"). Every field optional.
 Result<DeformationRequest> decode_request_json(std::string_view body);
 
 // ---------------------------------------------------------------------------------------------
@@ -183,5 +184,9 @@ Result<std::vector<GeometryInfo>> decode_geometry_list_json(std::string_view bod
 
 /// Parses a status name ("precomputing", "ready", "failed").
 Result<GeometryStatus> parse_geometry_status(std::string_view name);
+
+/// Parses a model name ("linear", "nonlinear"): the request's JSON field `model` and the query
+/// parameter `model=` of `POST .../results` and `PUT .../holds`.
+Result<DeformationModel> parse_deformation_model(std::string_view name);
 
 }  // namespace softshell::wire

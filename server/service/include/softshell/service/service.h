@@ -15,6 +15,7 @@
 #include <functional>
 #include <future>
 #include <memory>
+#include <optional>
 #include <stop_token>
 #include <string>
 #include <vector>
@@ -22,6 +23,7 @@
 #include "softshell/control_mesh.h"
 #include "softshell/deformation.h"
 #include "softshell/engine/factor_cache.h"
+#include "softshell/engine/nonlinear_solver.h"
 #include "softshell/engine/shell_model.h"
 #include "softshell/engine/solver.h"
 #include "softshell/material.h"
@@ -61,10 +63,19 @@ struct StoredResult {
   uint32_t res_id = 0;                    ///< 1, 2, 3, ... per geometry, in the order stored
   std::vector<Vec3> positions;            ///< deformed control points (#V)
   DeformationRequest request;             ///< what was asked (for undo, replay, sharing)
-  engine::SolveStats stats;               ///< how it was solved
+  engine::SolveStats stats;               ///< how it was solved (linear model)
+  std::optional<engine::NonlinearStats> nonlinear;  ///< how it was solved, if with the nonlinear model
   std::chrono::system_clock::time_point stored_at;
 
-  DeformationResult to_result() const { return {res_id, positions}; }
+  DeformationResult to_result() const {
+    DeformationResult r{res_id, positions};
+    if (nonlinear) {
+      r.model = DeformationModel::kNonlinear;
+      r.iterations = nonlinear->iterations;
+      r.residual = nonlinear->residual;
+    }
+    return r;
+  }
 };
 using ResultPtr = std::shared_ptr<const StoredResult>;
 
