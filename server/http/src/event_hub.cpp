@@ -1,0 +1,544 @@
+#include "event_hub.h"
+
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/epoll.h>
+#include <sys/eventfd.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <string_view>
+#include <thread>
+
+#include "softshell/wire.h"
+
+namespace softshell::http::internal {
+
+using service::ResultPtr;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct GeomIdKey {
+  size_t operator()(const GeomId& id) const noexcept {
+    size_t h = 0;
+    std::memcpy(&h, id.bytes.data(), sizeof h);  // the id is a cryptographic hash already
+    return h;
+  }
+};
+
+// What goes out on a stream: the chunked form of the bytes (`bytes`), and where the plain bytes
+// are inside it (for HTTP/1.0 streams, which have no chunked framing).
+struct Frame {
+  std::string bytes;
+  size_t raw_begin = 0, raw_end = 0;
+  uint32_t res_id = 0;  // 0: not a result (head, keep-alive, end)
+};
+using FramePtr = std::shared_ptr<const Frame>;
+
+FramePtr chunk(std::string_view payload, uint32_t res_id) {
+  auto f = std::make_shared<Frame>();
+  char size[24];
+  const int n = std::snprintf(size, sizeof size, "%zx\r\n", payload.size());
+  f->bytes.reserve(static_cast<size_t>(n) + payload.size() + 2);
+  f->bytes.append(size, static_cast<size_t>(n)).append(payload).append("\r\n");
+  f->raw_begin = static_cast<size_t>(n);
+  f->raw_end = f->raw_begin + payload.size();
+  f->res_id = res_id;
+  return f;
+}
+
+FramePtr whole(std::string bytes) {
+  auto f = std::make_shared<Frame>();
+  f->bytes = std::move(bytes);
+  f->raw_end = f->bytes.size();
+  return f;
+}
+
+const FramePtr& head11() {
+  static const FramePtr f = whole(
+      "HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\n"
+      "X-Accel-Buffering: no\r\nTransfer-Encoding: chunked\r\n\r\n");
+  return f;
+}
+const FramePtr& head10() {
+  static const FramePtr f = whole(
+      "HTTP/1.0 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\n"
+      "X-Accel-Buffering: no\r\nConnection: close\r\n\r\n");
+  return f;
+}
+const FramePtr& keep_alive_frame() {
+  static const FramePtr f = chunk(": keep-alive\n\n", 0);
+  return f;
+}
+const FramePtr& end_frame() {
+  static const FramePtr f = [] {
+    auto e = std::make_shared<Frame>();
+    e->bytes = "0\r\n\r\n";  // the end of a chunked body; nothing for HTTP/1.0
+    return FramePtr(std::move(e));
+  }();
+  return f;
+}
+
+}  // namespace
+
+struct Topic;
+
+// One open stream (writer thread only).
+struct Stream {
+  int fd = -1;
+  std::shared_ptr<Topic> topic;
+  bool chunked = true;
+  size_t topic_index = 0, all_index = 0;
+  FramePtr current;       // being written
+  size_t offset = 0;
+  FramePtr next;          // waiting (latest wins)
+  uint32_t sent_id = 0;   // newest result queued (or the client's `have`)
+  bool want_out = false;  // EPOLLOUT registered
+  bool blocked = false;
+  bool closing = false;   // the end is queued: close once written
+  Clock::time_point blocked_since{}, last_write{};
+
+  std::string_view view(const Frame& f) const {
+    return chunked ? std::string_view(f.bytes)
+                   : std::string_view(f.bytes).substr(f.raw_begin, f.raw_end - f.raw_begin);
+  }
+};
+
+// A geometry with open streams.
+struct Topic {
+  GeomId id;
+  // Under Impl::topics_mu:
+  std::unique_ptr<service::Subscription> subscription;
+  size_t members = 0;  // tickets and streams
+  // Under Impl::inbox_mu:
+  ResultPtr incoming;
+  bool queued = false;
+  // Writer thread only:
+  uint32_t latest_id = 0;
+  FramePtr frame;  // of the newest result
+  std::vector<Stream*> streams;
+};
+
+struct Arrival {
+  std::shared_ptr<Topic> topic;
+  int fd = -1;
+  uint32_t have = 0;
+  bool http10 = false;
+};
+
+struct EventHub::Impl {
+  Impl(std::shared_ptr<service::Service> s, Options o) : service(std::move(s)), options(o) {
+    epfd = ::epoll_create1(EPOLL_CLOEXEC);
+    wakefd = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
+    if (epfd < 0 || wakefd < 0) throw Exception(ErrorCode::kUnavailable, "the event writer cannot start (epoll)");
+    epoll_event ev{};
+    ev.events = EPOLLIN;
+    ev.data.ptr = nullptr;  // the wake-up descriptor
+    ::epoll_ctl(epfd, EPOLL_CTL_ADD, wakefd, &ev);
+    writer = std::thread([this] { run(); });
+  }
+
+  ~Impl() {
+    stop();
+    ::close(epfd);
+    ::close(wakefd);
+  }
+
+  // --- any thread ----------------------------------------------------------------------------
+  void wake() {
+    const uint64_t one = 1;
+    (void)!::write(wakefd, &one, sizeof one);
+  }
+
+  void post(const std::shared_ptr<Topic>& topic, const ResultPtr& result) {
+    bool signal = false;
+    {
+      std::lock_guard lock(inbox_mu);
+      if (!topic->incoming || result->res_id > topic->incoming->res_id) topic->incoming = result;
+      if (!topic->queued) {
+        topic->queued = true;
+        signal = updated.empty() && arrivals.empty();
+        updated.push_back(topic);
+      }
+    }
+    if (signal) wake();
+  }
+
+  void leave(const std::shared_ptr<Topic>& topic) {
+    std::lock_guard lock(topics_mu);
+    if (--topic->members > 0) {
+      (void)topic->subscription->set_followers(topic->members);  // fewer: never refused
+      return;
+    }
+    if (auto it = topics.find(topic->id); it != topics.end() && it->second == topic) topics.erase(it);
+    topic->subscription.reset();
+  }
+
+  Result<std::shared_ptr<Topic>> join(const GeomId& id) {
+    std::lock_guard lock(topics_mu);
+    if (stopping) return Error{ErrorCode::kUnavailable, "the server is shutting down"};
+    if (auto it = topics.find(id); it != topics.end()) {
+      const auto& topic = it->second;
+      if (auto ok = topic->subscription->set_followers(topic->members + 1); !ok) return ok.error();
+      ++topic->members;
+      return topic;
+    }
+    auto topic = std::make_shared<Topic>();
+    topic->id = id;
+    std::weak_ptr<Topic> weak = topic;
+    auto subscription = service->subscribe(id, [this, weak](const ResultPtr& r) {
+      if (auto t = weak.lock()) post(t, r);
+    });
+    if (!subscription) return subscription.error();
+    topic->subscription = std::move(*subscription);
+    topic->members = 1;
+    topics.emplace(id, topic);
+    // The newest result stored before the subscription (after it, so that none falls between).
+    if (auto newest = service->latest_result(id, 0, std::chrono::milliseconds(0)); newest && *newest) post(topic, *newest);
+    return topic;
+  }
+
+  void attach(std::shared_ptr<Topic> topic, int fd, uint32_t have, bool http10) {
+    const int flags = ::fcntl(fd, F_GETFL, 0);
+    ::fcntl(fd, F_SETFL, flags | O_NONBLOCK);
+    int yes = 1;
+    ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+    bool refused = false, signal = false;
+    {
+      std::lock_guard lock(inbox_mu);
+      if (stop_requested) {
+        refused = true;
+      } else {
+        signal = updated.empty() && arrivals.empty();
+        arrivals.push_back({std::move(topic), fd, have, http10});
+      }
+    }
+    if (refused) {  // stopping: the stream would end at once
+      static constexpr std::string_view kBusy =
+          "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nContent-Length: 61\r\n"
+          "Connection: close\r\n\r\n{\"error\":\"unavailable\",\"message\":\"the server is shutting down\"}";
+      (void)!::send(fd, kBusy.data(), kBusy.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+      ::shutdown(fd, SHUT_WR);
+      ::close(fd);
+      leave(topic);
+      return;
+    }
+    if (signal) wake();
+  }
+
+  void stop() {
+    {
+      std::lock_guard lock(topics_mu);
+      stopping = true;
+    }
+    {
+      std::lock_guard lock(inbox_mu);
+      stop_requested = true;
+    }
+    wake();
+    std::lock_guard join_lock(join_mu);
+    if (writer.joinable()) writer.join();
+  }
+
+  // --- the writer thread ---------------------------------------------------------------------
+  void run() {
+    std::vector<epoll_event> events(512);
+    auto next_sweep = Clock::now() + std::chrono::seconds(1);
+    bool draining = false;
+    Clock::time_point drain_deadline{};
+    for (;;) {
+      const auto now = Clock::now();
+      auto until = draining ? std::min(next_sweep, drain_deadline) : next_sweep;
+      const int timeout = static_cast<int>(std::max<int64_t>(
+          0, std::chrono::duration_cast<std::chrono::milliseconds>(until - now).count() + 1));
+      const int n = ::epoll_wait(epfd, events.data(), static_cast<int>(events.size()), timeout);
+      for (int i = 0; i < n; ++i) {
+        if (events[static_cast<size_t>(i)].data.ptr == nullptr) {
+          uint64_t count;
+          (void)!::read(wakefd, &count, sizeof count);
+          continue;
+        }
+        auto* s = static_cast<Stream*>(events[static_cast<size_t>(i)].data.ptr);
+        if (s->fd < 0) continue;  // closed earlier in this batch
+        handle(*s, events[static_cast<size_t>(i)].events);
+      }
+      if (!draining && take_inbox()) {
+        draining = true;
+        drain_deadline = Clock::now() + options.drain_timeout;
+        for (Stream* s : std::vector<Stream*>(all)) finish(*s);
+      }
+      if (Clock::now() >= next_sweep) {
+        sweep();
+        next_sweep = Clock::now() + std::chrono::seconds(1);
+      }
+      bury();
+      if (draining && (all.empty() || Clock::now() >= drain_deadline)) break;
+    }
+    for (Stream* s : std::vector<Stream*>(all)) close(*s);
+    bury();
+  }
+
+  // Takes what other threads queued; true if stopping was asked for.
+  bool take_inbox() {
+    std::vector<std::shared_ptr<Topic>> topics_now;
+    std::vector<Arrival> arrived;
+    std::vector<ResultPtr> results;
+    bool stop_now = false;
+    {
+      std::lock_guard lock(inbox_mu);
+      topics_now.swap(updated);
+      arrived.swap(arrivals);
+      for (const auto& t : topics_now) {
+        results.push_back(std::move(t->incoming));
+        t->incoming.reset();
+        t->queued = false;
+      }
+      stop_now = stop_requested;
+    }
+    for (size_t i = 0; i < topics_now.size(); ++i) publish(*topics_now[i], results[i]);
+    for (auto& a : arrived) add(std::move(a));
+    return stop_now;
+  }
+
+  void publish(Topic& topic, const ResultPtr& result) {
+    if (!result || result->res_id <= topic.latest_id) return;
+    std::string json;
+    try {
+      json = result->holds ? wire::encode_result_json(result->to_result(), *result->holds)
+                           : wire::encode_result_json(result->to_result());
+    } catch (const std::exception&) {
+      return;  // a stored result is finite; nothing else can fail here
+    }
+    std::string payload = "id: " + std::to_string(result->res_id) + "\nevent: result\ndata: ";
+    payload.append(json).append("\n\n");
+    topic.latest_id = result->res_id;
+    topic.frame = chunk(payload, result->res_id);
+    frames_serialized.fetch_add(1, std::memory_order_relaxed);
+    for (Stream* s : std::vector<Stream*>(topic.streams)) deliver(*s, topic.frame);
+  }
+
+  void add(Arrival a) {
+    auto* s = new Stream;
+    s->fd = a.fd;
+    s->topic = std::move(a.topic);
+    s->chunked = !a.http10;
+    s->sent_id = a.have;
+    s->last_write = Clock::now();
+    epoll_event ev{};
+    ev.events = EPOLLIN | EPOLLRDHUP;
+    ev.data.ptr = s;
+    if (::epoll_ctl(epfd, EPOLL_CTL_ADD, s->fd, &ev) != 0) {
+      ::close(s->fd);
+      leave(s->topic);
+      delete s;
+      return;
+    }
+    s->topic_index = s->topic->streams.size();
+    s->topic->streams.push_back(s);
+    s->all_index = all.size();
+    all.push_back(s);
+    streams_open.store(all.size(), std::memory_order_relaxed);
+    s->current = a.http10 ? head10() : head11();
+    if (s->topic->frame) deliver(*s, s->topic->frame);
+    flush(*s);
+  }
+
+  void deliver(Stream& s, const FramePtr& frame) {
+    if (s.closing || frame->res_id <= s.sent_id) return;
+    s.sent_id = frame->res_id;
+    if (!s.current) {
+      s.current = frame;
+      s.offset = 0;
+      flush(s);
+    } else {
+      if (s.next && s.next->res_id) frames_replaced.fetch_add(1, std::memory_order_relaxed);
+      s.next = frame;
+    }
+  }
+
+  void flush(Stream& s) {
+    while (s.current && s.fd >= 0) {
+      const std::string_view data = s.view(*s.current);
+      if (s.offset < data.size()) {
+        const ssize_t n = ::send(s.fd, data.data() + s.offset, data.size() - s.offset, MSG_NOSIGNAL | MSG_DONTWAIT);
+        if (n < 0) {
+          if (errno == EINTR) continue;
+          if (errno == EAGAIN || errno == EWOULDBLOCK) {
+            if (!s.blocked) {
+              s.blocked = true;
+              s.blocked_since = Clock::now();
+            }
+            watch_out(s, true);
+            return;
+          }
+          close(s);
+          return;
+        }
+        s.offset += static_cast<size_t>(n);
+        continue;
+      }
+      if (s.current->res_id) frames_sent.fetch_add(1, std::memory_order_relaxed);
+      s.current = std::move(s.next);
+      s.next.reset();
+      s.offset = 0;
+      s.blocked = false;
+      s.last_write = Clock::now();
+    }
+    if (s.fd < 0) return;
+    watch_out(s, false);
+    if (s.closing && !s.current) {
+      ::shutdown(s.fd, SHUT_WR);
+      close(s);
+    }
+  }
+
+  void watch_out(Stream& s, bool on) {
+    if (s.want_out == on) return;
+    s.want_out = on;
+    epoll_event ev{};
+    ev.events = EPOLLIN | EPOLLRDHUP | (on ? EPOLLOUT : 0u);
+    ev.data.ptr = &s;
+    ::epoll_ctl(epfd, EPOLL_CTL_MOD, s.fd, &ev);
+  }
+
+  void handle(Stream& s, uint32_t ev) {
+    if (ev & (EPOLLERR | EPOLLHUP)) {
+      close(s);
+      return;
+    }
+    if (ev & (EPOLLIN | EPOLLRDHUP)) {
+      // Followers send nothing after their request; anything is read and dropped, and the end
+      // of their side means they are gone.
+      char scratch[4096];
+      for (;;) {
+        const ssize_t n = ::recv(s.fd, scratch, sizeof scratch, MSG_DONTWAIT);
+        if (n > 0) continue;
+        if (n < 0 && errno == EINTR) continue;
+        if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) break;
+        close(s);
+        return;
+      }
+    }
+    if (ev & EPOLLOUT) flush(s);
+  }
+
+  // Queues the end of the stream after the frame being written (a newer waiting one is dropped).
+  void finish(Stream& s) {
+    if (s.closing || s.fd < 0) return;
+    s.closing = true;
+    if (s.current) {
+      s.next = end_frame();
+    } else {
+      s.current = end_frame();
+      s.offset = 0;
+    }
+    flush(s);
+  }
+
+  void sweep() {
+    const auto now = Clock::now();
+    for (Stream* s : std::vector<Stream*>(all)) {
+      if (s->fd < 0) continue;
+      if (s->current && s->blocked && now - s->blocked_since > options.stall_timeout) {
+        streams_stalled.fetch_add(1, std::memory_order_relaxed);
+        close(*s);
+      } else if (!s->current && !s->closing && now - s->last_write >= options.keep_alive) {
+        s->current = keep_alive_frame();
+        s->offset = 0;
+        flush(*s);
+      }
+    }
+  }
+
+  void close(Stream& s) {
+    if (s.fd < 0) return;
+    ::epoll_ctl(epfd, EPOLL_CTL_DEL, s.fd, nullptr);
+    ::close(s.fd);
+    s.fd = -1;
+    auto& list = s.topic->streams;
+    list[s.topic_index] = list.back();
+    list[s.topic_index]->topic_index = s.topic_index;
+    list.pop_back();
+    all[s.all_index] = all.back();
+    all[s.all_index]->all_index = s.all_index;
+    all.pop_back();
+    streams_open.store(all.size(), std::memory_order_relaxed);
+    graveyard.push_back(&s);
+  }
+
+  // Frees streams closed in this round (events of the same epoll batch may still name them).
+  void bury() {
+    for (Stream* s : graveyard) {
+      leave(s->topic);
+      delete s;
+    }
+    graveyard.clear();
+  }
+
+  std::shared_ptr<service::Service> service;
+  Options options;
+  int epfd = -1, wakefd = -1;
+
+  mutable std::mutex topics_mu;
+  std::unordered_map<GeomId, std::shared_ptr<Topic>, GeomIdKey> topics;
+  bool stopping = false;
+
+  std::mutex inbox_mu;
+  std::vector<std::shared_ptr<Topic>> updated;
+  std::vector<Arrival> arrivals;
+  bool stop_requested = false;
+
+  // Writer thread only.
+  std::vector<Stream*> all;
+  std::vector<Stream*> graveyard;
+
+  std::atomic<size_t> streams_open{0};
+  std::atomic<uint64_t> frames_serialized{0}, frames_sent{0}, frames_replaced{0}, streams_stalled{0};
+
+  std::mutex join_mu;
+  std::thread writer;  // last: starts once everything above exists
+};
+
+EventHub::Ticket::~Ticket() {
+  if (topic_) hub_->leave(topic_);
+}
+
+EventHub::EventHub(std::shared_ptr<service::Service> service, Options options)
+    : impl_(std::make_unique<Impl>(std::move(service), options)) {}
+
+EventHub::~EventHub() = default;
+
+Result<std::unique_ptr<EventHub::Ticket>> EventHub::open(const GeomId& id) {
+  auto topic = impl_->join(id);
+  if (!topic) return topic.error();
+  return std::make_unique<Ticket>(impl_.get(), std::move(*topic));
+}
+
+void EventHub::attach(std::unique_ptr<Ticket> ticket, int fd, uint32_t have, bool http10) {
+  impl_->attach(ticket->release(), fd, have, http10);
+}
+
+void EventHub::stop() { impl_->stop(); }
+
+EventHub::Stats EventHub::stats() const {
+  Stats s;
+  s.streams = impl_->streams_open.load(std::memory_order_relaxed);
+  {
+    std::lock_guard lock(impl_->topics_mu);
+    s.topics = impl_->topics.size();
+  }
+  s.frames_serialized = impl_->frames_serialized.load(std::memory_order_relaxed);
+  s.frames_sent = impl_->frames_sent.load(std::memory_order_relaxed);
+  s.frames_replaced = impl_->frames_replaced.load(std::memory_order_relaxed);
+  s.streams_stalled = impl_->streams_stalled.load(std::memory_order_relaxed);
+  return s;
+}
+
+}  // namespace softshell::http::internal
