@@ -108,7 +108,17 @@ class ConstraintRows {
     for (int a = 0; a < 3; ++a) {
       std::vector<const AxisRow*> rows;
       for (const AxisRow& row : rows_[a]) {
-        if (include[row.hold]) rows.push_back(&row);
+        if (!include[row.hold]) continue;
+        const bool zero = std::all_of(row.terms.begin(), row.terms.end(), [](const auto& t) { return t.second == 0.0; });
+        if (!zero) {
+          rows.push_back(&row);
+        } else if (row.rhs != 0.0) {  // 0 = rhs (dropped when rhs = 0, as the solver does)
+          if (detail) {
+            *detail = row.what + " of hold " + quoted(ids_[row.hold]) + " has only zero coefficients but asks for " +
+                      number(row.rhs);
+          }
+          return false;
+        }
       }
       if (rows.empty()) continue;
       std::unordered_map<int32_t, Eigen::Index> column;
@@ -117,23 +127,18 @@ class ConstraintRows {
           if (coef != 0.0) column.emplace(cp, static_cast<Eigen::Index>(column.size()));
         }
       }
-      if (rows.size() > kMaxRows || rows.size() * std::max<size_t>(column.size(), 1) > kMaxEntries) continue;
+      if (rows.size() > kMaxRows || rows.size() * column.size() > kMaxEntries) continue;
       const auto nr = static_cast<Eigen::Index>(rows.size());
       Eigen::MatrixXd c = Eigen::MatrixXd::Zero(nr, static_cast<Eigen::Index>(column.size()));
       Eigen::VectorXd d(nr);
       for (Eigen::Index i = 0; i < nr; ++i) {
         const AxisRow& row = *rows[static_cast<size_t>(i)];
-        double scale = 0.0;
         for (const auto& [cp, coef] : row.terms) {
           if (coef != 0.0) c(i, column.at(cp)) += coef;
         }
-        scale = c.row(i).cwiseAbs().maxCoeff();
-        if (scale > 0.0) {
-          c.row(i) /= scale;
-          d[i] = row.rhs / scale;
-        } else {
-          d[i] = row.rhs;  // 0 = rhs: consistent only for rhs = 0
-        }
+        const double scale = c.row(i).cwiseAbs().maxCoeff();
+        c.row(i) /= scale > 0.0 ? scale : 1.0;  // (terms that cancel leave 0 = rhs, judged below)
+        d[i] = scale > 0.0 ? row.rhs / scale : row.rhs;
       }
       Eigen::VectorXd x = Eigen::VectorXd::Zero(c.cols());
       if (c.cols() > 0) {

@@ -46,6 +46,7 @@ struct BatchOutcome {
   std::optional<engine::Solution> solution;    // of `state`; empty if it cannot be solved
   Error failure;                               // why not
   DeformationRequest request;                  // `state` as one request (what the result stores)
+  bool unchanged = false;                      // `state` is the solved state it started from: no new result
   int solves = 0;
 };
 
@@ -70,11 +71,17 @@ class BatchSolver {
     return solution;
   }
 
-  BatchOutcome run(const HoldMap& committed, const std::vector<HoldChange>& batch) {
+  // `solved`: `committed` has a stored result (so it need not be solved again).
+  BatchOutcome run(const HoldMap& committed, bool solved, const std::vector<HoldChange>& batch) {
     BatchOutcome out;
     out.refusals.resize(batch.size());
     HoldMap candidate = committed;
     for (const auto& change : batch) apply(candidate, change);
+    if (solved && same(candidate, committed)) {  // e.g. a new hold released before it was solved
+      out.state = committed;
+      out.unchanged = true;
+      return out;
+    }
     auto attempt = solve(candidate, &out.request);
     const bool any_put = std::any_of(batch.begin(), batch.end(), [](const HoldChange& c) { return c.version != nullptr; });
     if (attempt || !any_put) {
@@ -102,6 +109,12 @@ class BatchSolver {
       const auto kept = state.find(change.hold_id);
       out.refusals[i] = explain_refusal(trial, change.hold_id, kept == state.end() ? 0 : kept->second->version,
                                         tried.error(), solver_.model().evaluator(), length_);
+    }
+    if (!last && solved && same(state, committed)) {  // every change refused
+      out.state = committed;
+      out.unchanged = true;
+      out.solves = solves_;
+      return out;
     }
     if (!last) last = same(state, candidate) ? attempt : solve(state);
     DeformationRequest merged = assemble(state).merged;
@@ -148,6 +161,7 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
   HoldTable& t = e->holds;
   std::vector<HoldChange> batch;
   HoldMap committed;
+  bool solved = false;
   std::shared_ptr<const engine::Solver> solver;
   {
     std::lock_guard lock(e->mu);
@@ -157,6 +171,7 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
       batch.assign(std::make_move_iterator(t.pending.begin()), std::make_move_iterator(t.pending.end()));
       t.pending.clear();
       committed = t.committed;
+      solved = !t.unsolvable && t.latest;
       solver = e->solver;
     }
   }
@@ -167,9 +182,9 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
 
   const auto start = Clock::now();
   BatchSolver solve(*solver, e->geometry->mesh.bounding_diagonal());
-  BatchOutcome out = solve.run(committed, batch);
+  BatchOutcome out = solve.run(committed, solved, batch);
   const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  hold_solves.fetch_add(1);
+  if (out.solves > 0) hold_solves.fetch_add(1);
   hold_changes_solved.fetch_add(batch.size());
   hold_solve_hist.observe(seconds);
 
@@ -200,6 +215,7 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
         h.newest_seq = 0;
         if (!h.accepted) {  // a refused new hold is not created
           leases.cancel(h.lease);
+          t.retire(change.hold_id, h);
           t.live.erase(live);
         }
       }
@@ -210,7 +226,11 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
 
   ResultPtr result;
   Error store_error{ErrorCode::kOk, ""};
-  if (out.solution) {
+  if (out.unchanged) {
+    std::lock_guard lock(e->mu);
+    result = t.latest;
+    commit(result, "");
+  } else if (out.solution) {
     auto stored = std::make_shared<StoredResult>();
     stored->positions = out.solution->positions(e->geometry->mesh);
     stored->stats = out.solution->stats;
@@ -234,6 +254,15 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
     commit(nullptr, "the remaining holds cannot be solved: " + out.failure.message);
   }
 
+  // Versions no longer in force are freed (and their bytes returned) before anyone is answered.
+  std::vector<bool> is_put(batch.size());
+  for (size_t i = 0; i < batch.size(); ++i) {
+    is_put[i] = batch[i].version != nullptr;
+    batch[i].version.reset();
+  }
+  committed.clear();
+  out.state.clear();
+
   // Answers, outside the lock.
   for (size_t i = 0; i < batch.size(); ++i) {
     const HoldChange& change = batch[i];
@@ -245,7 +274,7 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
       answer = *out.refusals[i];
     } else if (store_error.code != ErrorCode::kOk) {
       answer = store_error;
-    } else if (!result && !change.version) {
+    } else if (!result && !is_put[i]) {
       answer = Error{ErrorCode::kConflict, "hold '" + change.hold_id +
                                                "' was released, but the remaining holds cannot be solved: " +
                                                out.failure.message + " (no result is stored until a change of the "
@@ -264,7 +293,10 @@ void Service::Impl::fail_hold_waiters(Entry& e, const Error& error, bool drop_ch
     waiting.swap(t.waiters);
     if (drop_changes) {
       t.pending.clear();
-      for (auto& [id, h] : t.live) leases.cancel(h.lease);
+      for (auto& [id, h] : t.live) {
+        leases.cancel(h.lease);
+        t.retire(id, h);
+      }
       t.live.clear();
     }
   }
@@ -295,6 +327,7 @@ void Service::Impl::expire_hold(const std::weak_ptr<Entry>& weak, const std::str
     auto it = t.live.find(hold_id);
     if (stopping.load() || it == t.live.end() || it->second.lease != lease || it->second.expires > Clock::now()) return;
     t.pending.push_back(HoldChange{t.next_seq++, hold_id, it->second.instance, nullptr});
+    t.retire(hold_id, it->second);
     t.live.erase(it);
     leases_expired.fetch_add(1);
     launch = claim_hold_solve_locked(*e);
@@ -356,6 +389,10 @@ Result<HoldTicket> Service::put_hold(const GeomId& id, const std::string& hold_i
       if (it == t.live.end()) {
         LiveHold h;
         h.instance = t.next_instance++;
+        if (auto r = t.retired.find(hold_id); r != t.retired.end()) {
+          h.next_version = r->second;
+          t.retired.erase(r);
+        }
         it = t.live.emplace(hold_id, std::move(h)).first;
       }
       LiveHold& h = it->second;
@@ -395,6 +432,7 @@ Result<HoldTicket> Service::release_hold(const GeomId& id, const std::string& ho
       const uint64_t seq = t.next_seq++;
       t.pending.push_back(HoldChange{seq, hold_id, it->second.instance, nullptr});
       t.waiters[seq].push_back(promise);
+      t.retire(hold_id, it->second);
       t.live.erase(it);
       launch = impl_->claim_hold_solve_locked(*e);
     }

@@ -84,6 +84,16 @@ struct LiveHold {
 };
 
 struct HoldTable {
+  // Released holds' next versions, so that an id used again continues its count (the versions
+  // in results and events only grow per hold id). Bounded: beyond kMaxRetired entries the first
+  // by id is forgotten.
+  static constexpr size_t kMaxRetired = 4096;
+  std::map<std::string, uint64_t, std::less<>> retired;
+  void retire(const std::string& id, const LiveHold& h) {
+    retired[id] = h.next_version;
+    if (retired.size() > kMaxRetired) retired.erase(retired.begin());
+  }
+
   std::map<std::string, LiveHold, std::less<>> live;
   HoldMap committed;                 // what the last processed changes left: the solver's view
   std::deque<HoldChange> pending;    // not yet taken by a solve, in arrival order
