@@ -89,16 +89,15 @@ class SseParser {
 
   void parse_body() {
     if (chunked_) {
-      for (;;) {
-        if (last_chunk_) return;
+      while (!last_chunk_) {
         const size_t crlf = raw_.find("\r\n");
-        if (crlf == std::string::npos) return;
+        if (crlf == std::string::npos) break;
         const size_t size = std::strtoul(raw_.substr(0, crlf).c_str(), nullptr, 16);
-        if (raw_.size() < crlf + 2 + size + 2) return;
+        if (raw_.size() < crlf + 2 + size + 2) break;
         if (size == 0) {
           last_chunk_ = true;
           raw_.clear();
-          return;
+          break;
         }
         text_.append(raw_, crlf + 2, size);
         raw_.erase(0, crlf + 2 + size + 2);
