@@ -89,8 +89,9 @@ const FramePtr& end_frame() {
 }  // namespace
 
 struct Topic;
+struct Shard;
 
-// One open stream (writer thread only).
+// One open stream (its shard's thread only).
 struct Stream {
   int fd = -1;
   std::shared_ptr<Topic> topic;
@@ -113,17 +114,40 @@ struct Stream {
 
 // A geometry with open streams.
 struct Topic {
+  explicit Topic(size_t shards) : per_shard(shards) {}
   GeomId id;
   // Under Impl::topics_mu:
   std::unique_ptr<service::Subscription> subscription;
   size_t members = 0;  // tickets and streams
-  // Under Impl::inbox_mu:
-  ResultPtr incoming;
-  bool queued = false;
-  // Writer thread only:
-  uint32_t latest_id = 0;
-  FramePtr frame;  // of the newest result
-  std::vector<Stream*> streams;
+  // The newest result serialized, shared by every shard (under frame_mu).
+  std::mutex frame_mu;
+  FramePtr frame;
+  struct PerShard {
+    ResultPtr incoming;  // under the shard's inbox_mu
+    bool queued = false;
+    ResultPtr latest;    // the shard's thread only, from here on: the newest result it has seen
+    std::vector<Stream*> streams;
+  };
+  std::vector<PerShard> per_shard;
+
+  // The frame of `result`, serialized by the first shard that asks; null if a newer one is
+  // already out (this one is then skipped).
+  FramePtr frame_of(const ResultPtr& result, std::atomic<uint64_t>& serialized) {
+    std::lock_guard lock(frame_mu);
+    if (frame && frame->res_id >= result->res_id) return frame->res_id == result->res_id ? frame : nullptr;
+    std::string json;
+    try {
+      json = result->holds ? wire::encode_result_json(result->to_result(), *result->holds)
+                           : wire::encode_result_json(result->to_result());
+    } catch (const std::exception&) {
+      return nullptr;  // a stored result is finite; nothing else can fail here
+    }
+    std::string payload = "id: " + std::to_string(result->res_id) + "\nevent: result\ndata: ";
+    payload.append(json).append("\n\n");
+    frame = chunk(payload, result->res_id);
+    serialized.fetch_add(1, std::memory_order_relaxed);
+    return frame;
+  }
 };
 
 struct Arrival {
@@ -133,8 +157,15 @@ struct Arrival {
   bool http10 = false;
 };
 
-struct EventHub::Impl {
-  Impl(std::shared_ptr<service::Service> s, Options o) : service(std::move(s)), options(o) {
+struct Counters {
+  std::atomic<size_t> streams{0};
+  std::atomic<uint64_t> frames_serialized{0}, frames_sent{0}, frames_replaced{0}, streams_stalled{0};
+};
+
+// One writer thread with its own epoll set, serving a share of the streams.
+struct Shard {
+  Shard(size_t i, const EventHub::Options& o, Counters& c, std::function<void(const std::shared_ptr<Topic>&)> on_leave)
+      : index(i), options(o), counters(c), leave(std::move(on_leave)) {
     epfd = ::epoll_create1(EPOLL_CLOEXEC);
     wakefd = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
     if (epfd < 0 || wakefd < 0) throw Exception(ErrorCode::kUnavailable, "the event writer cannot start (epoll)");
@@ -145,7 +176,7 @@ struct EventHub::Impl {
     writer = std::thread([this] { run(); });
   }
 
-  ~Impl() {
+  ~Shard() {
     stop();
     ::close(epfd);
     ::close(wakefd);
@@ -161,9 +192,10 @@ struct EventHub::Impl {
     bool signal = false;
     {
       std::lock_guard lock(inbox_mu);
-      if (!topic->incoming || result->res_id > topic->incoming->res_id) topic->incoming = result;
-      if (!topic->queued) {
-        topic->queued = true;
+      auto& mine = topic->per_shard[index];
+      if (!mine.incoming || result->res_id > mine.incoming->res_id) mine.incoming = result;
+      if (!mine.queued) {
+        mine.queued = true;
         signal = updated.empty() && arrivals.empty();
         updated.push_back(topic);
       }
@@ -171,78 +203,29 @@ struct EventHub::Impl {
     if (signal) wake();
   }
 
-  void leave(const std::shared_ptr<Topic>& topic) {
-    std::lock_guard lock(topics_mu);
-    if (--topic->members > 0) {
-      (void)topic->subscription->set_followers(topic->members);  // fewer: never refused
-      return;
-    }
-    if (auto it = topics.find(topic->id); it != topics.end() && it->second == topic) topics.erase(it);
-    topic->subscription.reset();
-  }
-
-  Result<std::shared_ptr<Topic>> join(const GeomId& id) {
-    std::lock_guard lock(topics_mu);
-    if (stopping) return Error{ErrorCode::kUnavailable, "the server is shutting down"};
-    if (auto it = topics.find(id); it != topics.end()) {
-      const auto& topic = it->second;
-      if (auto ok = topic->subscription->set_followers(topic->members + 1); !ok) return ok.error();
-      ++topic->members;
-      return topic;
-    }
-    auto topic = std::make_shared<Topic>();
-    topic->id = id;
-    std::weak_ptr<Topic> weak = topic;
-    auto subscription = service->subscribe(id, [this, weak](const ResultPtr& r) {
-      if (auto t = weak.lock()) post(t, r);
-    });
-    if (!subscription) return subscription.error();
-    topic->subscription = std::move(*subscription);
-    topic->members = 1;
-    topics.emplace(id, topic);
-    // The newest result stored before the subscription (after it, so that none falls between).
-    if (auto newest = service->latest_result(id, 0, std::chrono::milliseconds(0)); newest && *newest) post(topic, *newest);
-    return topic;
-  }
-
-  void attach(std::shared_ptr<Topic> topic, int fd, uint32_t have, bool http10) {
-    const int flags = ::fcntl(fd, F_GETFL, 0);
-    ::fcntl(fd, F_SETFL, flags | O_NONBLOCK);
-    int yes = 1;
-    ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
-    bool refused = false, signal = false;
+  // False if the shard stops (the caller answers the client).
+  bool attach(Arrival a) {
+    bool signal = false;
     {
       std::lock_guard lock(inbox_mu);
-      if (stop_requested) {
-        refused = true;
-      } else {
-        signal = updated.empty() && arrivals.empty();
-        arrivals.push_back({std::move(topic), fd, have, http10});
-      }
-    }
-    if (refused) {  // stopping: the stream would end at once
-      static constexpr std::string_view kBusy =
-          "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nContent-Length: 61\r\n"
-          "Connection: close\r\n\r\n{\"error\":\"unavailable\",\"message\":\"the server is shutting down\"}";
-      (void)!::send(fd, kBusy.data(), kBusy.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
-      ::shutdown(fd, SHUT_WR);
-      ::close(fd);
-      leave(topic);
-      return;
+      if (stop_requested) return false;
+      signal = updated.empty() && arrivals.empty();
+      arrivals.push_back(std::move(a));
     }
     if (signal) wake();
+    return true;
   }
 
-  void stop() {
-    {
-      std::lock_guard lock(topics_mu);
-      stopping = true;
-    }
+  void request_stop() {
     {
       std::lock_guard lock(inbox_mu);
       stop_requested = true;
     }
     wake();
+  }
+
+  void stop() {
+    request_stop();
     std::lock_guard join_lock(join_mu);
     if (writer.joinable()) writer.join();
   }
@@ -296,9 +279,10 @@ struct EventHub::Impl {
       topics_now.swap(updated);
       arrived.swap(arrivals);
       for (const auto& t : topics_now) {
-        results.push_back(std::move(t->incoming));
-        t->incoming.reset();
-        t->queued = false;
+        auto& mine = t->per_shard[index];
+        results.push_back(std::move(mine.incoming));
+        mine.incoming.reset();
+        mine.queued = false;
       }
       stop_now = stop_requested;
     }
@@ -308,20 +292,14 @@ struct EventHub::Impl {
   }
 
   void publish(Topic& topic, const ResultPtr& result) {
-    if (!result || result->res_id <= topic.latest_id) return;
-    std::string json;
-    try {
-      json = result->holds ? wire::encode_result_json(result->to_result(), *result->holds)
-                           : wire::encode_result_json(result->to_result());
-    } catch (const std::exception&) {
-      return;  // a stored result is finite; nothing else can fail here
-    }
-    std::string payload = "id: " + std::to_string(result->res_id) + "\nevent: result\ndata: ";
-    payload.append(json).append("\n\n");
-    topic.latest_id = result->res_id;
-    topic.frame = chunk(payload, result->res_id);
-    frames_serialized.fetch_add(1, std::memory_order_relaxed);
-    for (Stream* s : std::vector<Stream*>(topic.streams)) deliver(*s, topic.frame);
+    auto& mine = topic.per_shard[index];
+    if (!result || (mine.latest && result->res_id <= mine.latest->res_id)) return;
+    mine.latest = result;
+    if (mine.streams.empty()) return;  // (serialized when a stream of this shard needs it)
+    // Null when another shard already serialized a newer one: it is in this shard's inbox too.
+    FramePtr frame = topic.frame_of(result, counters.frames_serialized);
+    if (!frame) return;
+    for (Stream* s : std::vector<Stream*>(mine.streams)) deliver(*s, frame);
   }
 
   void add(Arrival a) {
@@ -340,13 +318,21 @@ struct EventHub::Impl {
       delete s;
       return;
     }
-    s->topic_index = s->topic->streams.size();
-    s->topic->streams.push_back(s);
+    auto& mine = s->topic->per_shard[index];
+    s->topic_index = mine.streams.size();
+    mine.streams.push_back(s);
     s->all_index = all.size();
     all.push_back(s);
-    streams_open.store(all.size(), std::memory_order_relaxed);
+    counters.streams.fetch_add(1, std::memory_order_relaxed);
     s->current = a.http10 ? head10() : head11();
-    if (s->topic->frame) deliver(*s, s->topic->frame);
+    // The newest result: this shard's (serialized now if none of its streams needed it yet), or
+    // a newer one another shard serialized already.
+    FramePtr newest = mine.latest ? s->topic->frame_of(mine.latest, counters.frames_serialized) : nullptr;
+    if (!newest) {
+      std::lock_guard lock(s->topic->frame_mu);
+      newest = s->topic->frame;
+    }
+    if (newest) deliver(*s, newest);
     flush(*s);
   }
 
@@ -358,7 +344,7 @@ struct EventHub::Impl {
       s.offset = 0;
       flush(s);
     } else {
-      if (s.next && s.next->res_id) frames_replaced.fetch_add(1, std::memory_order_relaxed);
+      if (s.next && s.next->res_id) counters.frames_replaced.fetch_add(1, std::memory_order_relaxed);
       s.next = frame;
     }
   }
@@ -384,7 +370,7 @@ struct EventHub::Impl {
         s.offset += static_cast<size_t>(n);
         continue;
       }
-      if (s.current->res_id) frames_sent.fetch_add(1, std::memory_order_relaxed);
+      if (s.current->res_id) counters.frames_sent.fetch_add(1, std::memory_order_relaxed);
       s.current = std::move(s.next);
       s.next.reset();
       s.offset = 0;
@@ -447,7 +433,7 @@ struct EventHub::Impl {
     for (Stream* s : std::vector<Stream*>(all)) {
       if (s->fd < 0) continue;
       if (s->current && s->blocked && now - s->blocked_since > options.stall_timeout) {
-        streams_stalled.fetch_add(1, std::memory_order_relaxed);
+        counters.streams_stalled.fetch_add(1, std::memory_order_relaxed);
         close(*s);
       } else if (!s->current && !s->closing && now - s->last_write >= options.keep_alive) {
         s->current = keep_alive_frame();
@@ -462,14 +448,14 @@ struct EventHub::Impl {
     ::epoll_ctl(epfd, EPOLL_CTL_DEL, s.fd, nullptr);
     ::close(s.fd);
     s.fd = -1;
-    auto& list = s.topic->streams;
+    auto& list = s.topic->per_shard[index].streams;
     list[s.topic_index] = list.back();
     list[s.topic_index]->topic_index = s.topic_index;
     list.pop_back();
     all[s.all_index] = all.back();
     all[s.all_index]->all_index = s.all_index;
     all.pop_back();
-    streams_open.store(all.size(), std::memory_order_relaxed);
+    counters.streams.fetch_sub(1, std::memory_order_relaxed);
     graveyard.push_back(&s);
   }
 
@@ -482,13 +468,11 @@ struct EventHub::Impl {
     graveyard.clear();
   }
 
-  std::shared_ptr<service::Service> service;
-  Options options;
+  const size_t index;
+  const EventHub::Options options;
+  Counters& counters;
+  const std::function<void(const std::shared_ptr<Topic>&)> leave;
   int epfd = -1, wakefd = -1;
-
-  mutable std::mutex topics_mu;
-  std::unordered_map<GeomId, std::shared_ptr<Topic>, GeomIdKey> topics;
-  bool stopping = false;
 
   std::mutex inbox_mu;
   std::vector<std::shared_ptr<Topic>> updated;
@@ -499,11 +483,94 @@ struct EventHub::Impl {
   std::vector<Stream*> all;
   std::vector<Stream*> graveyard;
 
-  std::atomic<size_t> streams_open{0};
-  std::atomic<uint64_t> frames_serialized{0}, frames_sent{0}, frames_replaced{0}, streams_stalled{0};
-
   std::mutex join_mu;
   std::thread writer;  // last: starts once everything above exists
+};
+
+struct EventHub::Impl {
+  Impl(std::shared_ptr<service::Service> s, Options o) : service(std::move(s)), options(o) {
+    const size_t n = std::max<size_t>(1, options.writers);
+    for (size_t i = 0; i < n; ++i) {
+      shards.push_back(std::make_unique<Shard>(i, options, counters, [this](const std::shared_ptr<Topic>& t) { leave(t); }));
+    }
+  }
+
+  ~Impl() { stop(); }
+
+  void post(const std::shared_ptr<Topic>& topic, const ResultPtr& result) {
+    for (auto& shard : shards) shard->post(topic, result);
+  }
+
+  void leave(const std::shared_ptr<Topic>& topic) {
+    std::lock_guard lock(topics_mu);
+    if (--topic->members > 0) {
+      (void)topic->subscription->set_followers(topic->members);  // fewer: never refused
+      return;
+    }
+    if (auto it = topics.find(topic->id); it != topics.end() && it->second == topic) topics.erase(it);
+    topic->subscription.reset();
+  }
+
+  Result<std::shared_ptr<Topic>> join(const GeomId& id) {
+    std::lock_guard lock(topics_mu);
+    if (stopping) return Error{ErrorCode::kUnavailable, "the server is shutting down"};
+    if (auto it = topics.find(id); it != topics.end()) {
+      const auto& topic = it->second;
+      if (auto ok = topic->subscription->set_followers(topic->members + 1); !ok) return ok.error();
+      ++topic->members;
+      return topic;
+    }
+    auto topic = std::make_shared<Topic>(shards.size());
+    topic->id = id;
+    std::weak_ptr<Topic> weak = topic;
+    auto subscription = service->subscribe(id, [this, weak](const ResultPtr& r) {
+      if (auto t = weak.lock()) post(t, r);
+    });
+    if (!subscription) return subscription.error();
+    topic->subscription = std::move(*subscription);
+    topic->members = 1;
+    topics.emplace(id, topic);
+    // The newest result stored before the subscription (after it, so that none falls between).
+    if (auto newest = service->latest_result(id, 0, std::chrono::milliseconds(0)); newest && *newest) post(topic, *newest);
+    return topic;
+  }
+
+  void attach(std::shared_ptr<Topic> topic, int fd, uint32_t have, bool http10) {
+    const int flags = ::fcntl(fd, F_GETFL, 0);
+    ::fcntl(fd, F_SETFL, flags | O_NONBLOCK);
+    int yes = 1;
+    ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+    Shard& shard = *shards[next_shard.fetch_add(1, std::memory_order_relaxed) % shards.size()];
+    if (shard.attach({topic, fd, have, http10})) return;
+    // Stopping: the stream would end at once.
+    static constexpr std::string_view kBusy =
+        "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nContent-Length: 61\r\n"
+        "Connection: close\r\n\r\n{\"error\":\"unavailable\",\"message\":\"the server is shutting down\"}";
+    (void)!::send(fd, kBusy.data(), kBusy.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+    ::shutdown(fd, SHUT_WR);
+    ::close(fd);
+    leave(topic);
+  }
+
+  void stop() {
+    {
+      std::lock_guard lock(topics_mu);
+      stopping = true;
+    }
+    for (auto& shard : shards) shard->request_stop();  // all drain at once
+    for (auto& shard : shards) shard->stop();
+  }
+
+  std::shared_ptr<service::Service> service;
+  Options options;
+  Counters counters;
+
+  mutable std::mutex topics_mu;
+  std::unordered_map<GeomId, std::shared_ptr<Topic>, GeomIdKey> topics;
+  bool stopping = false;
+
+  std::atomic<size_t> next_shard{0};
+  std::vector<std::unique_ptr<Shard>> shards;  // last: their threads use everything above
 };
 
 EventHub::Ticket::~Ticket() {
@@ -529,15 +596,16 @@ void EventHub::stop() { impl_->stop(); }
 
 EventHub::Stats EventHub::stats() const {
   Stats s;
-  s.streams = impl_->streams_open.load(std::memory_order_relaxed);
+  const Counters& c = impl_->counters;
+  s.streams = c.streams.load(std::memory_order_relaxed);
   {
     std::lock_guard lock(impl_->topics_mu);
     s.topics = impl_->topics.size();
   }
-  s.frames_serialized = impl_->frames_serialized.load(std::memory_order_relaxed);
-  s.frames_sent = impl_->frames_sent.load(std::memory_order_relaxed);
-  s.frames_replaced = impl_->frames_replaced.load(std::memory_order_relaxed);
-  s.streams_stalled = impl_->streams_stalled.load(std::memory_order_relaxed);
+  s.frames_serialized = c.frames_serialized.load(std::memory_order_relaxed);
+  s.frames_sent = c.frames_sent.load(std::memory_order_relaxed);
+  s.frames_replaced = c.frames_replaced.load(std::memory_order_relaxed);
+  s.streams_stalled = c.streams_stalled.load(std::memory_order_relaxed);
   return s;
 }
 

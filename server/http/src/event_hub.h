@@ -1,6 +1,7 @@
 #pragma once
-// The event writer (private to the HTTP layer): serves every `GET .../events` stream
-// (Server-Sent Events) from one thread over non-blocking sockets.
+// The event writers (private to the HTTP layer): serve every `GET .../events` stream
+// (Server-Sent Events) from a few threads (`Options::writers`, each with its own epoll set and
+// a share of the streams) over non-blocking sockets.
 //
 // A connection thread answers the request's checks (404, 400, 503, 507) and then hands its
 // socket over (`Connection::take`); from then on the stream costs no thread. Per geometry
@@ -33,6 +34,7 @@ class EventHub {
     std::chrono::milliseconds keep_alive{10000};     // a comment after this long without a frame
     std::chrono::milliseconds stall_timeout{30000};  // a stream that takes nothing this long is closed
     std::chrono::milliseconds drain_timeout{2000};   // how long `stop` lets streams finish their frame
+    size_t writers = 2;                              // writer threads (epoll sets); streams are dealt round-robin
   };
 
   struct Stats {

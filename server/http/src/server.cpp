@@ -53,6 +53,7 @@ struct HttpServer::Impl {
     internal::EventHub::Options events;
     events.keep_alive = ctx.options.event_keep_alive;
     events.stall_timeout = ctx.options.event_stall_timeout;
+    events.writers = static_cast<size_t>(std::max(1, ctx.options.event_writers));
     ctx.events = std::make_unique<internal::EventHub>(ctx.service, events);
     ctx.metrics = [this] { return metrics_text(); };
     configure();

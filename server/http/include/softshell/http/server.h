@@ -11,8 +11,9 @@
 /// an I/O thread while they wait) can never starve a computation, and at most
 /// `max_connections - reserved_connections` connections may long-poll at once, so waiters cannot
 /// starve other requests of I/O threads either. Event streams (`GET .../events`) hold no I/O
-/// thread: once their request is checked, the socket goes to one event writer thread that serves
-/// every stream over non-blocking sockets (each result serialized once, latest wins per stream),
+/// thread: once their request is checked, the socket goes to an event writer thread (of
+/// `event_writers`), which serves its share of the streams over non-blocking sockets (each
+/// result serialized once for all of them, latest wins per stream),
 /// so they count against the file descriptor limit and the service's memory budget only.
 
 #include <chrono>
@@ -57,6 +58,8 @@ struct ServerOptions {
   /// An event stream whose client takes no bytes for this long is closed (its newest frame
   /// waits meanwhile; nothing older is queued).
   std::chrono::milliseconds event_stall_timeout{30000};
+  /// Threads that write event streams (each serves a share of the streams over epoll).
+  int event_writers = 2;
   /// Where request lines (`info`: method, path, status, microseconds) and handler failures
   /// (`error`) go.
   service::Logger logger;
