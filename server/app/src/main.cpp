@@ -9,6 +9,7 @@
 #include <thread>
 
 #include <pthread.h>
+#include <sys/resource.h>
 
 #include "softshell/http/server.h"
 #include "softshell/service/log.h"
@@ -30,17 +31,21 @@ options:
   --precompute-jobs N  geometries precomputed at the same time (default 1)
   --cache-mb M         memory budget of the factorization cache in MiB (default 1024);
                        least recently used factors are evicted to stay under it
-  --store-mb S         memory budget in MiB for meshes, precomputed models and results
-                       (default: half the physical memory); uploads and results that do not
-                       fit are refused with 507, nothing stored is ever dropped
+  --store-mb S         memory budget in MiB for meshes, precomputed models, results, holds
+                       and event-stream followers (default: half the physical memory); what
+                       does not fit is refused with 507, nothing stored is ever dropped
   --max-body-mb B      largest request body in MiB (default 64); larger bodies get 413
-  --max-connections C  open connections served at once, one thread each (default 1024)
+  --max-connections C  open connections served at once, one thread each (default 1024);
+                       event streams (GET .../events) do not count: they are served by
+                       the event writers and limited by the descriptor limit and --store-mb
+  --event-writers W    threads writing event streams (default 2)
   --log-level L        debug, info, warning, error or off (default info); info logs one line
                        per request: method, path, status, microseconds
   --help               this text
 
 The server prints "softshell-server listening on http://HOST:PORT" once it accepts requests and
-stops cleanly on SIGINT or SIGTERM (waiting long polls are answered, running solves finish).
+stops cleanly on SIGINT or SIGTERM (waiting long polls and hold changes are answered, event
+streams end after the event they are sending, running solves finish).
 )";
 
 [[noreturn]] void usage_error(const std::string& message) {
@@ -95,6 +100,8 @@ int main(int argc, char** argv) {
       http_options.max_body_bytes = static_cast<size_t>(integer_arg(arg, value(), 1, 4096)) << 20;
     } else if (arg == "--max-connections") {
       http_options.max_connections = static_cast<int>(integer_arg(arg, value(), 8, 32768));
+    } else if (arg == "--event-writers") {
+      http_options.event_writers = static_cast<int>(integer_arg(arg, value(), 1, 64));
     } else if (arg == "--log-level") {
       auto parsed = service::parse_log_level(value());
       if (!parsed) usage_error(parsed.error().message);
@@ -108,6 +115,14 @@ int main(int argc, char** argv) {
   service_options.logger = logger;
   http_options.logger = logger;
   http_options.reserved_connections = std::min(http_options.reserved_connections, http_options.max_connections / 2);
+
+  // Every open connection and event stream is a descriptor: the soft limit (often 1024) is
+  // raised to the hard one.
+  rlimit files{};
+  if (::getrlimit(RLIMIT_NOFILE, &files) == 0 && files.rlim_cur < files.rlim_max) {
+    files.rlim_cur = files.rlim_max;
+    ::setrlimit(RLIMIT_NOFILE, &files);
+  }
 
   // SIGINT and SIGTERM are taken by sigwait below; every thread created from here on inherits
   // the blocked mask, so no worker is interrupted by them.

@@ -495,7 +495,13 @@ struct EventHub::Impl {
     }
   }
 
-  ~Impl() { stop(); }
+  ~Impl() {
+    stop();
+    // The subscriptions end before the shards go (a listener call would post to them).
+    std::lock_guard lock(topics_mu);
+    for (auto& [id, topic] : topics) topic->subscription.reset();
+    topics.clear();
+  }
 
   void post(const std::shared_ptr<Topic>& topic, const ResultPtr& result) {
     for (auto& shard : shards) shard->post(topic, result);
@@ -504,7 +510,7 @@ struct EventHub::Impl {
   void leave(const std::shared_ptr<Topic>& topic) {
     std::lock_guard lock(topics_mu);
     if (--topic->members > 0) {
-      (void)topic->subscription->set_followers(topic->members);  // fewer: never refused
+      if (topic->subscription) (void)topic->subscription->set_followers(topic->members);  // fewer: never refused
       return;
     }
     if (auto it = topics.find(topic->id); it != topics.end() && it->second == topic) topics.erase(it);
