@@ -7,7 +7,7 @@
 // cores: the lag includes the subscribers' own reading. Store times come from a listener in the
 // server process (Service::subscribe), written to shared memory with CLOCK_MONOTONIC.
 //
-// usage: bench_events [results per run, default 20] [rate Hz, default 10]
+// usage: bench_events [results per run, default 20] [rate Hz, default 10] [event writer threads, default 2]
 #include <fcntl.h>
 #include <sys/epoll.h>
 #include <sys/mman.h>
@@ -112,12 +112,13 @@ DeformationRequest scene_request(int scene, const ControlMesh& mesh, int k) {
 }
 
 // The server process: serves until `release` is closed by the parent.
-[[noreturn]] void serve(Shared* shared, int release) {
+[[noreturn]] void serve(Shared* shared, int release, int writers) {
   service::ServiceOptions so;
   so.precompute_threads = 2;
   auto svc = std::make_shared<service::Service>(so);
   http::ServerOptions ho;
   ho.logger = {};
+  ho.event_writers = writers;
   http::HttpServer server(svc, ho);
   const int port = server.start("127.0.0.1", 0).value();
   std::vector<std::unique_ptr<service::Subscription>> stamps;
@@ -295,6 +296,7 @@ RunResult run(Shared* shared, pid_t server, int scene, int subscribers, int resu
 int main(int argc, char** argv) {
   const int results = argc > 1 ? std::atoi(argv[1]) : 20;
   const double hz = argc > 2 ? std::atof(argv[2]) : 10.0;
+  const int writers = argc > 3 ? std::atoi(argv[3]) : 2;
   rlimit lim{};
   ::getrlimit(RLIMIT_NOFILE, &lim);
   lim.rlim_cur = lim.rlim_max;
@@ -307,14 +309,14 @@ int main(int argc, char** argv) {
   const pid_t child = ::fork();
   if (child == 0) {
     ::close(pipe_fds[1]);
-    serve(shared, pipe_fds[0]);
+    serve(shared, pipe_fds[0], writers);
   }
   ::close(pipe_fds[0]);
   while (!shared->ready.load()) std::this_thread::sleep_for(std::chrono::milliseconds(10));
 
   std::printf("softshell event fan-out on %s; server in its own process, subscribers in one epoll thread of "
-              "another, %d results at %.0f Hz per run (descriptor limit %llu)\n\n",
-              bench::machine().c_str(), results, hz, static_cast<unsigned long long>(lim.rlim_cur));
+              "another, %d results at %.0f Hz per run, %d event writer threads (descriptor limit %llu)\n\n",
+              bench::machine().c_str(), results, hz, writers, static_cast<unsigned long long>(lim.rlim_cur));
   std::printf("| mesh | event bytes | subscribers | connect all | lag p50 | p99 | max | missed | server CPU per result | "
               "server RSS idle | with subscribers | per subscriber |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | "
               "---: | ---: | ---: | ---: | ---: |\n");

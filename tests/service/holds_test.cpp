@@ -1,6 +1,7 @@
 // Holds (PROTOCOL.md version 2) in softshell::service, without HTTP: the hold state, versions,
 // renewals, 409/422, releases and the unsolvable state, leases, the coalescing solver loop,
 // exactness of the combined solve, the shared history, subscriptions, memory and shutdown.
+// (One file of ~600 lines: one case per behaviour of the holds API, sharing the helpers above them.)
 #include <gtest/gtest.h>
 
 #include <algorithm>

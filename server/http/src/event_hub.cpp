@@ -1,3 +1,5 @@
+// (One file of ~600 lines: the frames, streams, topics and writer shards share private structures
+// that nothing outside the event writers needs.)
 #include "event_hub.h"
 
 #include <fcntl.h>
