@@ -183,7 +183,20 @@ struct RunResult {
   double rss_before = 0, rss_with = 0;
   double connect_s = 0;
   double server_cpu_ms = 0;  // per result, while fanning out
+  // The server's own delivery lag (result reaching the writers -> event written to the socket,
+  // softshell_http_event_delivery_seconds): share of events within 10 ms and within 50 ms.
+  double server_within_10 = 0, server_within_50 = 0;
 };
+
+// The share of a Prometheus histogram's samples at or below `le` (a bucket bound).
+double share_within(const std::string& metrics, const std::string& name, const char* le) {
+  auto value = [&](const std::string& key) {
+    const size_t at = metrics.find(key);
+    return at == std::string::npos ? 0.0 : std::atof(metrics.c_str() + at + key.size());
+  };
+  const double count = value(name + "_count ");
+  return count > 0 ? value(name + "_bucket{le=\"" + le + "\"} ") / count : 0.0;
+}
 
 RunResult run(Shared* shared, pid_t server, int scene, int subscribers, int results, double hz) {
   RunResult out;
@@ -197,7 +210,10 @@ RunResult run(Shared* shared, pid_t server, int scene, int subscribers, int resu
     const ControlMesh mesh = scene_mesh(scene);
     auto r = producer->Post(("/geometries/" + id + "/results").c_str(), {{"Accept", "application/octet-stream"}},
                             wire::encode_request_binary(scene_request(scene, mesh, k)).value(), "application/octet-stream");
-    if (!r || r->status != 200) return 0u;
+    if (!r || r->status != 200) {
+      std::fprintf(stderr, "POST failed: %s\n", r ? (std::to_string(r->status) + " " + r->body).c_str() : httplib::to_string(r.error()).c_str());
+      return 0u;
+    }
     return wire::decode_result_binary(r->body).value().res_id;
   };
   const uint32_t base = post(0);  // every subscriber gets this one at once: it shows it is connected
@@ -281,6 +297,10 @@ RunResult run(Shared* shared, pid_t server, int scene, int subscribers, int resu
   out.server_cpu_ms = (cpu_seconds(server) - cpu0) * 1e3 / results;
   stop.store(true);
   reader.join();
+  if (auto m = producer->Get("/metrics"); m && m->status == 200) {
+    out.server_within_10 = share_within(m->body, "softshell_http_event_delivery_seconds", "0.01");
+    out.server_within_50 = share_within(m->body, "softshell_http_event_delivery_seconds", "0.05");
+  }
   for (uint32_t rid : produced) {
     out.lags_ms.insert(out.lags_ms.end(), per_result[rid].begin(), per_result[rid].end());
     out.missed += static_cast<size_t>(subscribers) - per_result[rid].size();
@@ -308,9 +328,9 @@ int main(int argc, char** argv) {
               "subscribers in one epoll thread of another process, %d results at %.0f Hz per run, %d event writer "
               "threads (descriptor limit %llu)\n\n",
               bench::machine().c_str(), load[0], results, hz, writers, static_cast<unsigned long long>(lim.rlim_cur));
-  std::printf("| mesh | event bytes | subscribers | connect all | lag p50 | p99 | max | missed | server CPU per result | "
-              "server RSS idle | with subscribers | per subscriber |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | "
-              "---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("| mesh | event bytes | subscribers | connect all | lag p50 | p99 | max | missed | server: written within 10 ms | 50 ms | "
+              "server CPU per result | server RSS idle | with subscribers | per subscriber |\n| --- | ---: | ---: | ---: | "
+              "---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (int scene = 0; scene < kScenes; ++scene) {
     for (int n : {100, 1000, 2000}) {
       new (shared) Shared();
@@ -324,11 +344,11 @@ int main(int argc, char** argv) {
       ::close(pipe_fds[0]);
       while (!shared->ready.load()) std::this_thread::sleep_for(std::chrono::milliseconds(10));
       const RunResult r = run(shared, child, scene, n, results, hz);
-      std::printf("| %s | %zu | %d | %.2f s | %.2f ms | %.2f ms | %.2f ms | %zu | %.1f ms | %.1f MiB | %.1f MiB | %.1f KiB |\n",
+      std::printf("| %s | %zu | %d | %.2f s | %.2f ms | %.2f ms | %.2f ms | %zu | %.1f%% | %.1f%% | %.1f ms | %.1f MiB | %.1f MiB | %.1f KiB |\n",
                   scene == 0 ? "grid 8x8" : "catmark_righthanded", r.frame_bytes, n, r.connect_s,
                   bench::percentile(r.lags_ms, 0.5), bench::percentile(r.lags_ms, 0.99),
                   r.lags_ms.empty() ? 0.0 : *std::max_element(r.lags_ms.begin(), r.lags_ms.end()), r.missed,
-                  r.server_cpu_ms, r.rss_before, r.rss_with, (r.rss_with - r.rss_before) * 1024.0 / n);
+                  100.0 * r.server_within_10, 100.0 * r.server_within_50, r.server_cpu_ms, r.rss_before, r.rss_with, (r.rss_with - r.rss_before) * 1024.0 / n);
       std::fflush(stdout);
       ::close(pipe_fds[1]);
       int status = 0;

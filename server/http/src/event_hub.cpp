@@ -41,10 +41,11 @@ struct Frame {
   std::string bytes;
   size_t raw_begin = 0, raw_end = 0;
   uint32_t res_id = 0;  // 0: not a result (head, keep-alive, end)
+  Clock::time_point stored{};  // when the result reached the writers (for the delivery lag)
 };
 using FramePtr = std::shared_ptr<const Frame>;
 
-FramePtr chunk(std::string_view payload, uint32_t res_id) {
+std::shared_ptr<Frame> chunk(std::string_view payload, uint32_t res_id) {
   auto f = std::make_shared<Frame>();
   char size[24];
   const int n = std::snprintf(size, sizeof size, "%zx\r\n", payload.size());
@@ -106,7 +107,7 @@ struct Stream {
   bool want_out = false;  // EPOLLOUT registered
   bool blocked = false;
   bool closing = false;   // the end is queued: close once written
-  Clock::time_point blocked_since{}, last_write{};
+  Clock::time_point blocked_since{}, last_write{}, attached{};
 
   std::string_view view(const Frame& f) const {
     return chunked ? std::string_view(f.bytes)
@@ -126,15 +127,17 @@ struct Topic {
   FramePtr frame;
   struct PerShard {
     ResultPtr incoming;  // under the shard's inbox_mu
+    Clock::time_point incoming_at{};
     bool queued = false;
     ResultPtr latest;    // the shard's thread only, from here on: the newest result it has seen
+    Clock::time_point latest_at{};
     std::vector<Stream*> streams;
   };
   std::vector<PerShard> per_shard;
 
   // The frame of `result`, serialized by the first shard that asks; null if a newer one is
   // already out (this one is then skipped).
-  FramePtr frame_of(const ResultPtr& result, std::atomic<uint64_t>& serialized) {
+  FramePtr frame_of(const ResultPtr& result, Clock::time_point stored, std::atomic<uint64_t>& serialized) {
     std::lock_guard lock(frame_mu);
     if (frame && frame->res_id >= result->res_id) return frame->res_id == result->res_id ? frame : nullptr;
     std::string json;
@@ -146,7 +149,9 @@ struct Topic {
     }
     std::string payload = "id: " + std::to_string(result->res_id) + "\nevent: result\ndata: ";
     payload.append(json).append("\n\n");
-    frame = chunk(payload, result->res_id);
+    auto made = chunk(payload, result->res_id);
+    made->stored = stored;
+    frame = std::move(made);
     serialized.fetch_add(1, std::memory_order_relaxed);
     return frame;
   }
@@ -163,6 +168,7 @@ struct Arrival {
 struct Counters {
   std::atomic<size_t> streams{0};
   std::atomic<uint64_t> frames_serialized{0}, frames_sent{0}, frames_replaced{0}, streams_stalled{0};
+  service::Histogram delivery;  // seconds from a result reaching the writers to its event written out
 };
 
 // One writer thread with its own epoll set, serving a share of the streams.
@@ -196,7 +202,10 @@ struct Shard {
     {
       std::lock_guard lock(inbox_mu);
       auto& mine = topic->per_shard[index];
-      if (!mine.incoming || result->res_id > mine.incoming->res_id) mine.incoming = result;
+      if (!mine.incoming || result->res_id > mine.incoming->res_id) {
+        mine.incoming = result;
+        mine.incoming_at = Clock::now();
+      }
       if (!mine.queued) {
         mine.queued = true;
         signal = updated.empty() && arrivals.empty();
@@ -275,7 +284,7 @@ struct Shard {
   bool take_inbox() {
     std::vector<std::shared_ptr<Topic>> topics_now;
     std::vector<Arrival> arrived;
-    std::vector<ResultPtr> results;
+    std::vector<std::pair<ResultPtr, Clock::time_point>> results;
     bool stop_now = false;
     {
       std::lock_guard lock(inbox_mu);
@@ -283,24 +292,25 @@ struct Shard {
       arrived.swap(arrivals);
       for (const auto& t : topics_now) {
         auto& mine = t->per_shard[index];
-        results.push_back(std::move(mine.incoming));
+        results.emplace_back(std::move(mine.incoming), mine.incoming_at);
         mine.incoming.reset();
         mine.queued = false;
       }
       stop_now = stop_requested;
     }
-    for (size_t i = 0; i < topics_now.size(); ++i) publish(*topics_now[i], results[i]);
+    for (size_t i = 0; i < topics_now.size(); ++i) publish(*topics_now[i], results[i].first, results[i].second);
     for (auto& a : arrived) add(std::move(a));
     return stop_now;
   }
 
-  void publish(Topic& topic, const ResultPtr& result) {
+  void publish(Topic& topic, const ResultPtr& result, Clock::time_point stored) {
     auto& mine = topic.per_shard[index];
     if (!result || (mine.latest && result->res_id <= mine.latest->res_id)) return;
     mine.latest = result;
+    mine.latest_at = stored;
     if (mine.streams.empty()) return;  // (serialized when a stream of this shard needs it)
     // Null when another shard already serialized a newer one: it is in this shard's inbox too.
-    FramePtr frame = topic.frame_of(result, counters.frames_serialized);
+    FramePtr frame = topic.frame_of(result, stored, counters.frames_serialized);
     if (!frame) return;
     for (Stream* s : std::vector<Stream*>(mine.streams)) deliver(*s, frame);
   }
@@ -311,7 +321,7 @@ struct Shard {
     s->topic = std::move(a.topic);
     s->chunked = !a.http10;
     s->sent_id = a.have;
-    s->last_write = Clock::now();
+    s->last_write = s->attached = Clock::now();
     epoll_event ev{};
     ev.events = EPOLLIN | EPOLLRDHUP;
     ev.data.ptr = s;
@@ -330,7 +340,7 @@ struct Shard {
     s->current = a.http10 ? head10() : head11();
     // The newest result: this shard's (serialized now if none of its streams needed it yet), or
     // a newer one another shard serialized already.
-    FramePtr newest = mine.latest ? s->topic->frame_of(mine.latest, counters.frames_serialized) : nullptr;
+    FramePtr newest = mine.latest ? s->topic->frame_of(mine.latest, mine.latest_at, counters.frames_serialized) : nullptr;
     if (!newest) {
       std::lock_guard lock(s->topic->frame_mu);
       newest = s->topic->frame;
@@ -373,12 +383,19 @@ struct Shard {
         s.offset += static_cast<size_t>(n);
         continue;
       }
-      if (s.current->res_id) counters.frames_sent.fetch_add(1, std::memory_order_relaxed);
+      const auto now = Clock::now();
+      if (s.current->res_id) {
+        counters.frames_sent.fetch_add(1, std::memory_order_relaxed);
+        // Stored -> written out: the lag of a result stored while the stream was open.
+        if (s.current->stored > s.attached) {
+          counters.delivery.observe(std::chrono::duration<double>(now - s.current->stored).count());
+        }
+      }
       s.current = std::move(s.next);
       s.next.reset();
       s.offset = 0;
       s.blocked = false;
-      s.last_write = Clock::now();
+      s.last_write = now;
     }
     if (s.fd < 0) return;
     watch_out(s, false);
@@ -611,6 +628,10 @@ EventHub::Stats EventHub::stats() const {
     s.frames_sent += c.frames_sent.load(std::memory_order_relaxed);
     s.frames_replaced += c.frames_replaced.load(std::memory_order_relaxed);
     s.streams_stalled += c.streams_stalled.load(std::memory_order_relaxed);
+    const auto d = c.delivery.snapshot();
+    for (size_t b = 0; b < d.buckets.size(); ++b) s.delivery.buckets[b] += d.buckets[b];
+    s.delivery.count += d.count;
+    s.delivery.sum += d.sum;
   }
   std::lock_guard lock(impl_->topics_mu);
   s.topics = impl_->topics.size();

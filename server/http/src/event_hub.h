@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "softshell/result.h"
+#include "softshell/service/metrics.h"
 #include "softshell/service/service.h"
 
 namespace softshell::http::internal {
@@ -44,6 +45,7 @@ class EventHub {
     uint64_t frames_sent = 0;        // frames written out completely (over all streams)
     uint64_t frames_replaced = 0;    // frames a slow stream skipped for a newer one
     uint64_t streams_stalled = 0;    // streams closed because they took nothing for stall_timeout
+    service::Histogram::Snapshot delivery;  // result reached the writers -> its event written to the socket
   };
 
   struct Impl;

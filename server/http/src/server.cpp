@@ -216,6 +216,9 @@ struct HttpServer::Impl {
             static_cast<double>(ev.frames_replaced));
     counter("softshell_http_event_streams_stalled_total", "Event streams closed because their client took nothing.",
             static_cast<double>(ev.streams_stalled));
+    m.family("softshell_http_event_delivery_seconds", "histogram",
+             "From a stored result reaching the event writers to its event written to a stream's socket, per stream.");
+    m.histogram("softshell_http_event_delivery_seconds", "", ev.delivery);
     return m.take() + ctx.service->metrics_text();
   }
 
