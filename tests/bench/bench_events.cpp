@@ -7,7 +7,7 @@
 // cores: the lag includes the subscribers' own reading. Store times come from a listener in the
 // server process (Service::subscribe), written to shared memory with CLOCK_MONOTONIC.
 //
-// usage: bench_events [results per run, default 20] [rate Hz, default 10] [event writer threads, default 2]
+// usage: bench_events [results per run, default 20] [rate Hz, default 10] [event writer threads, default 1]
 #include <fcntl.h>
 #include <sys/epoll.h>
 #include <sys/mman.h>
@@ -315,7 +315,7 @@ RunResult run(Shared* shared, pid_t server, int scene, int subscribers, int resu
 int main(int argc, char** argv) {
   const int results = argc > 1 ? std::atoi(argv[1]) : 20;
   const double hz = argc > 2 ? std::atof(argv[2]) : 10.0;
-  const int writers = argc > 3 ? std::atoi(argv[3]) : 2;
+  const int writers = argc > 3 ? std::atoi(argv[3]) : 1;
   rlimit lim{};
   ::getrlimit(RLIMIT_NOFILE, &lim);
   lim.rlim_cur = lim.rlim_max;

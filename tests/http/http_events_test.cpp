@@ -92,7 +92,9 @@ TEST(HttpEventsTest, NothingAtOnceWithoutResultsThenTheFirst) {
 }
 
 TEST(HttpEventsTest, ResumeWithHaveAndLastEventId) {
-  TestServer server;
+  http::ServerOptions o = test_server_options();
+  o.event_writers = 2;
+  TestServer server(test_service_options(), o);
   const Geo g = upload_ready(server);
   for (int k = 1; k <= 3; ++k) deform(server, g, k);
   {
@@ -220,7 +222,9 @@ TEST(HttpEventsTest, HangUpEndsTheStream) {
 }
 
 TEST(HttpEventsTest, ShutdownWithHoldsAndStreamsOpenEndsEveryStreamCleanly) {
-  auto server = std::make_unique<TestServer>();
+  http::ServerOptions o = test_server_options();
+  o.event_writers = 3;  // every writer ends its streams
+  auto server = std::make_unique<TestServer>(test_service_options(), o);
   const Geo g = upload_ready(*server);
   DeformationRequest pins;
   pins.vertex_constraints = pinned_corners();
@@ -262,7 +266,9 @@ TEST(HttpEventsTest, MoreThan1024ConnectionsOpenAtOnce) {
   // Descriptor numbers well above 1024 on both ends (select() would corrupt memory there).
   constexpr int kStreams = 1100;
   if (!enough_descriptors(2 * kStreams + 512)) GTEST_SKIP() << "the hard descriptor limit is below " << 2 * kStreams + 512;
-  TestServer server;
+  http::ServerOptions o = test_server_options();
+  o.event_writers = 3;  // streams dealt to three writers; each result serialized once for all
+  TestServer server(test_service_options(), o);
   const Geo g = upload_ready(server);
   deform(server, g, 1);
   std::vector<std::unique_ptr<SseClient>> streams;
@@ -302,6 +308,9 @@ TEST(HttpEventsTest, MoreThan1024ConnectionsOpenAtOnce) {
     EXPECT_EQ(e->data, expected_2);
   }
   EXPECT_EQ(get(*server.client(), "/health").status, 200);
+  const std::string metrics = get(*server.client(), "/metrics").body;
+  EXPECT_NE(metrics.find("softshell_http_event_frames_serialized_total 2\n"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("softshell_http_event_streams 1100\n"), std::string::npos);
 }
 
 }  // namespace

@@ -38,7 +38,7 @@ options:
   --max-connections C  open connections served at once, one thread each (default 1024);
                        event streams (GET .../events) do not count: they are served by
                        the event writers and limited by the descriptor limit and --store-mb
-  --event-writers W    threads writing event streams (default 2)
+  --event-writers W    threads writing event streams (default: half the cores, at least 1)
   --log-level L        debug, info, warning, error or off (default info); info logs one line
                        per request: method, path, status, microseconds
   --help               this text

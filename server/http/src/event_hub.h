@@ -35,7 +35,7 @@ class EventHub {
     std::chrono::milliseconds keep_alive{10000};     // a comment after this long without a frame
     std::chrono::milliseconds stall_timeout{30000};  // a stream that takes nothing this long is closed
     std::chrono::milliseconds drain_timeout{2000};   // how long `stop` lets streams finish their frame
-    size_t writers = 2;                              // writer threads (epoll sets); streams are dealt round-robin
+    size_t writers = 1;                              // writer threads (epoll sets); streams are dealt round-robin
   };
 
   struct Stats {

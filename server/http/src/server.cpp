@@ -53,7 +53,8 @@ struct HttpServer::Impl {
     internal::EventHub::Options events;
     events.keep_alive = ctx.options.event_keep_alive;
     events.stall_timeout = ctx.options.event_stall_timeout;
-    events.writers = static_cast<size_t>(std::max(1, ctx.options.event_writers));
+    const int hardware = static_cast<int>(std::thread::hardware_concurrency());
+    events.writers = static_cast<size_t>(ctx.options.event_writers > 0 ? ctx.options.event_writers : std::max(1, hardware / 2));
     ctx.events = std::make_unique<internal::EventHub>(ctx.service, events);
     ctx.metrics = [this] { return metrics_text(); };
     configure();

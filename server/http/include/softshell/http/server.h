@@ -58,8 +58,9 @@ struct ServerOptions {
   /// An event stream whose client takes no bytes for this long is closed (its newest frame
   /// waits meanwhile; nothing older is queued).
   std::chrono::milliseconds event_stall_timeout{30000};
-  /// Threads that write event streams (each serves a share of the streams over epoll).
-  int event_writers = 2;
+  /// Threads that write event streams (each serves a share of the streams over epoll); 0 = half
+  /// the hardware threads, at least 1 (the other half is left to solves and requests).
+  int event_writers = 0;
   /// Where request lines (`info`: method, path, status, microseconds) and handler failures
   /// (`error`) go.
   service::Logger logger;
