@@ -59,6 +59,7 @@ class InstantSession final : public Session {
     return none();
   }
   Result<LimitComb> limit_comb(const GeomId&, const SurfacePoint&) override { return none(); }
+  Result<StressField> stresses(const GeomId&, uint32_t, const StressQuery&) override { return none(); }
 
  private:
   static Error none() { return Error{ErrorCode::kInternal, "not used by the benchmark"}; }
@@ -157,6 +158,7 @@ Row run(const ControlMesh& mesh, int level, int bodies, bool results, bool backg
         return Error{};
       }
       Result<LimitComb> limit_comb(const GeomId&, const SurfacePoint&) override { return Error{}; }
+      Result<StressField> stresses(const GeomId&, uint32_t, const StressQuery&) override { return Error{}; }
     };
     bridge = std::make_unique<bullet::ShellBridge>(world);
     bridge->add_shell(std::make_shared<Silent>(), GeomId{}, mesh, settings).value();

@@ -11,6 +11,7 @@
 // grab is local).
 //
 // Usage: bench_engine [warm solves per mesh = 50] [largest scaling-curve DOFs = 100000, 0 = none]
+//                     [supports: only the support-cost table]
 #include <cstdio>
 #include <cstdlib>
 #include <map>
@@ -18,8 +19,10 @@
 
 #include "bench_support.h"
 #include "softshell/engine/solver.h"
+#include "softshell/interaction.h"
 #include "softshell/level_of_detail.h"
 #include "softshell/limit_evaluator.h"
+#include "softshell/tessellation.h"
 #include "test_meshes.h"
 
 using namespace softshell;
@@ -141,6 +144,80 @@ Measurement measure(ControlMesh mesh, int warm_solves, const LimitEvaluator::Opt
   return result;
 }
 
+// Warm-solve cost of two kinds of supports with a new random grab per request (issue 12,
+// "Constraints at full speed"): the same mesh, material and grabs, the object held either by the
+// lowest 5% of the control points (vertex supports: eliminated in the factor) or by a floor of
+// limit constraints, one per touching face, as the SDK's floor_contact builds them (level-3
+// tessellation, the lowest 1% of the size touching, more until the floor holds every rigid
+// motion, as the demo does). Each grab is solved with both supports one after the other (in
+// alternating order), so that load on the machine affects both alike.
+struct SupportCost {
+  int rows = 0;           // constraint rows of the supports
+  double first_ms = 0.0;  // first solve (the factorization)
+  double second_ms = 0.0; // second solve (for the floor: its rows are cached)
+  std::vector<double> times;
+  int skipped = 0;
+};
+
+void support_costs(ControlMesh mesh, int warm_solves, SupportCost& vertex, SupportCost& floor) {
+  const double scale = 1.0 / mesh.bounding_diagonal();
+  for (Vec3& p : mesh.positions()) p *= scale;
+  auto model = engine::ShellModel::build(mesh, kMaterial).value();
+  DeformationRequest on_vertices, on_floor;
+  on_vertices.vertex_constraints = bottom_supports(mesh, model->component_of());
+  {
+    const Tessellation surface = Tessellation::create(model->evaluator(), 3).value();
+    double floor_y = std::numeric_limits<double>::infinity();
+    for (const Vec3& p : surface.vertices()) floor_y = std::min(floor_y, p.y());
+    FloorContact contact;
+    for (double tolerance : {0.01, 0.03, 0.06, 0.12}) {
+      contact = floor_contact(surface, Plane{Vec3(0.0, floor_y, 0.0), Vec3::UnitY()}, {tolerance}).value();
+      if (contact.fixes_rigid_motion) break;
+    }
+    contact.add_to(on_floor);
+    floor.rows = static_cast<int>(3 * contact.limit_constraints.size());
+  }
+  engine::Solver solver(model, std::make_shared<engine::FactorCache>());
+  const LimitEvaluator& limit = model->evaluator();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (int solve = 0, attempt = 0; solve < warm_solves + 2 && attempt < 4 * (warm_solves + 2); ++attempt) {
+    SurfacePoint point;
+    point.face = static_cast<int32_t>(rng() % static_cast<unsigned>(mesh.num_faces()));
+    const auto corners = static_cast<unsigned>(mesh.face(point.face).size());
+    point.subface = corners == 4 ? 0 : static_cast<int32_t>(rng() % corners);
+    point.u = unit(rng);
+    point.v = unit(rng);
+    if (!limit.check(point).ok()) continue;
+    const LimitConstraint grab{point, 0.01 * limit.evaluate(point).normal(), {}, {}};
+    double ms[2] = {0.0, 0.0};
+    bool ok[2] = {false, false};
+    for (int k = 0; k < 2; ++k) {
+      const int which = (solve + k) % 2;  // alternate which support goes first
+      DeformationRequest request = which == 0 ? on_vertices : on_floor;
+      request.limit_constraints.push_back(grab);
+      const auto t0 = bench::Clock::now();
+      ok[which] = solver.solve(request).ok();
+      ms[which] = bench::ms_since(t0);
+    }
+    if (!ok[0] || !ok[1]) {  // a grab the vertex supports hold entirely (all its control points fixed)
+      ++vertex.skipped;
+      continue;
+    }
+    for (int which = 0; which < 2; ++which) {
+      SupportCost& cost = which == 0 ? vertex : floor;
+      if (solve == 0) {
+        cost.first_ms = ms[which];
+      } else if (solve == 1) {
+        cost.second_ms = ms[which];
+      } else {
+        cost.times.push_back(ms[which]);
+      }
+    }
+    ++solve;
+  }
+}
+
 const char* paper_row(int control_points) {
   return control_points < 135   ? "Cactus (60 CVs): 14 s / 2 ms"
          : control_points < 345 ? "Barrel (210) / Car door (218): 7 s, 20 s / 18 ms"
@@ -152,6 +229,7 @@ const char* paper_row(int control_points) {
 int main(int argc, char** argv) {
   const int warm_solves = argc > 1 ? std::max(1, std::atoi(argv[1])) : 50;
   const int max_scaling_dofs = argc > 2 ? std::atoi(argv[2]) : 100'000;
+  const bool supports_only = argc > 3 && std::string(argv[3]) == "supports";
   std::printf("softshell engine benchmark on %s\n", bench::machine().c_str());
   std::printf("E = 6.9e10 Pa, nu = 0.32, t = 2 mm, mesh scaled to a 1 m diagonal, lowest 5%% of the control "
               "points (per part, at least 4) fixed; warm solve = a new random limit constraint on the cached factor (%d per mesh)\n",
@@ -163,6 +241,7 @@ int main(int argc, char** argv) {
   std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n");
   std::string skipped;
   for (const std::string& name : test::asset_mesh_names()) {
+    if (supports_only) break;
     const ControlMesh mesh = test::load_asset_mesh(name);
     const Measurement m = measure(mesh, warm_solves);
     if (!m.error.empty()) {
@@ -177,6 +256,22 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
   }
   if (!skipped.empty()) std::printf("\ngrabs skipped (on a ghost face, or held entirely by the supports):%s\n", skipped.c_str());
+
+  std::printf("\nSupports + a new random grab per request (same setup; floor = sdk floor_contact's limit points; "
+              "both supports solved for each grab, interleaved; %d warm solves)\n\n", warm_solves);
+  std::printf("| mesh | supports | rows | first solve | second solve | warm p50 | p95 | warm p50 / vertex supports |\n");
+  std::printf("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  for (const char* name : {"spot_quadrangulated.obj", "blub_quadrangulated.obj"}) {
+    SupportCost vertex, floor;
+    support_costs(test::load_asset_mesh(name), warm_solves, vertex, floor);
+    const double base = bench::percentile(vertex.times, 0.5);
+    for (const auto& [label, cost] : {std::pair{"lowest 5% vertex supports", &vertex}, std::pair{"floor (limit points)", &floor}}) {
+      const double p50 = bench::percentile(cost->times, 0.5);
+      std::printf("| %s | %s | %d | %.1f ms | %.1f ms | %.2f ms | %.2f ms | %.2f |\n", name, label, cost->rows,
+                  cost->first_ms, cost->second_ms, p50, bench::percentile(cost->times, 0.95), base > 0.0 ? p50 / base : 0.0);
+    }
+    std::fflush(stdout);
+  }
   if (max_scaling_dofs <= 0) return 0;
 
   // Scaling: a cylindrical roof (curved, so membrane and bending couple) at growing resolution,

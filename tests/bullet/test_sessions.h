@@ -40,6 +40,7 @@ class ManualSession final : public Session {
     return unsupported();
   }
   Result<LimitComb> limit_comb(const GeomId&, const SurfacePoint&) override { return unsupported(); }
+  Result<StressField> stresses(const GeomId&, uint32_t, const StressQuery&) override { return unsupported(); }
 
  private:
   static Error unsupported() { return Error{ErrorCode::kInternal, "not part of the test double"}; }

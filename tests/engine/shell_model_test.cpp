@@ -201,7 +201,9 @@ TEST(ShellModel, DistortedFacesAreSplitUntilTheirStiffnessConverges) {
 
   QuadratureOptions bad;
   bad.max_cell_distortion = 0.5;
-  auto rejected = ShellModel::build(mesh, unit_material(), PrecomputeOptions{bad, {}, 0, nullptr, nullptr});
+  PrecomputeOptions options;
+  options.quadrature = bad;
+  auto rejected = ShellModel::build(mesh, unit_material(), options);
   ASSERT_FALSE(rejected.ok());
   EXPECT_EQ(rejected.error().code, ErrorCode::kInvalidArgument);
   EXPECT_NE(rejected.error().message.find("max_cell_distortion"), std::string::npos);

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "shell_benchmarks.h"
+#include "softshell/request_validation.h"
 #include "test_meshes.h"
 
 namespace softshell::engine {
@@ -278,14 +279,20 @@ TEST(Solver, ContradictionsAreRejectedAndRepetitionsAccepted) {
   EXPECT_NE(r.error().message.find("contradicts the vertex constraints"), std::string::npos) << r.error().message;
 }
 
-TEST(Solver, MalformedRequestsAreInvalidArguments) {
+// Requests are validated once at the boundary (validate_request); the engine asserts that
+// precondition, so a malformed request that reaches it is refused as a bug of the caller, naming
+// the bad element, and never solved.
+TEST(Solver, MalformedRequestsBreakItsPreconditionAndAreRefused) {
   Cantilever c;
   auto model = build(c.mesh);
   Solver solver(model, std::make_shared<FactorCache>());
   auto expect_invalid = [&](DeformationRequest request, const char* what) {
+    const Result<void> valid = validate_request(request, {model->num_control_points(), &model->evaluator()});
+    ASSERT_FALSE(valid.ok()) << what;
     auto r = solver.solve(request);
     ASSERT_FALSE(r.ok()) << what;
-    EXPECT_EQ(r.error().code, ErrorCode::kInvalidArgument) << what << ": " << r.error().message;
+    EXPECT_EQ(r.error().code, ErrorCode::kInternal) << what << ": " << r.error().message;
+    EXPECT_NE(r.error().message.find(valid.error().message), std::string::npos) << what << ": " << r.error().message;
   };
   DeformationRequest base;
   base.vertex_constraints = c.clamp();

@@ -2,10 +2,14 @@
  * (softshell_embedded_c.h): upload, pick, grab, asynchronous deformation polled like a game loop,
  * reading the deformed control points, and errors reported by the server. */
 
+#define _POSIX_C_SOURCE 199309L /* nanosleep */
 #include <math.h>
+#include <stdatomic.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "softshell/softshell_c.h"
 #include "softshell/softshell_embedded_c.h"
@@ -35,6 +39,14 @@ static int g_checks = 0;
   } while (0)
 
 #define CHECK_OK(expr) CHECK_STATUS(expr, SS_OK)
+
+/* The layout P/Invoke and other bindings see (bindings/csharp/Softshell.cs): fixed-size fields. */
+_Static_assert(sizeof(ss_embedded_options) == 80, "ss_embedded_options is 80 bytes");
+_Static_assert(offsetof(ss_embedded_options, listen) == 8 && offsetof(ss_embedded_options, http_port) == 12 &&
+                   offsetof(ss_embedded_options, http_host) == 16,
+               "ss_embedded_options field offsets");
+_Static_assert(sizeof(ss_geometry_status) == 24 && offsetof(ss_geometry_status, progress) == 16,
+               "ss_geometry_status layout");
 
 enum { N = 6, NV = (N + 1) * (N + 1) };
 
@@ -74,6 +86,18 @@ static void clamp(ss_request* request) {
   }
 }
 
+/* Log messages arrive on the server's threads. */
+static atomic_int g_precompute_logs;
+static void on_log(int32_t level, const char* message, void* user_data) {
+  (void)user_data;
+  if (level == SS_LOG_INFO && strstr(message, "precomputing geometry") != NULL) atomic_fetch_add(&g_precompute_logs, 1);
+}
+
+static void sleep_ms(int ms) {
+  struct timespec t = {0, (long)ms * 1000000L};
+  nanosleep(&t, NULL);
+}
+
 /* Polls like a game loop: a frame of work between polls, never blocking for long. */
 static int wait_for(ss_deformation* op, int* out_polls) {
   int32_t ready = 0;
@@ -88,9 +112,10 @@ static int wait_for(ss_deformation* op, int* out_polls) {
 }
 
 int main(void) {
+  CHECK_OK(ss_set_log_callback(on_log, NULL, SS_LOG_INFO));
   ss_embedded_options options;
   ss_embedded_options_default(&options);
-  CHECK(options.http_host == NULL && options.worker_threads == 0);
+  CHECK(options.listen == 0 && options.worker_threads == 0 && strcmp(options.http_host, "127.0.0.1") == 0);
   ss_session* session = NULL;
   CHECK_OK(ss_session_create_embedded(&options, &session));
   if (!session) {
@@ -98,8 +123,15 @@ int main(void) {
     return 1;
   }
   options.http_port = 70000;
-  options.http_host = "127.0.0.1";
+  options.listen = 1;
   ss_session* bad = NULL;
+  CHECK_STATUS(ss_session_create_embedded(&options, &bad), SS_INVALID_ARGUMENT);
+  CHECK(bad == NULL);
+  options.http_port = 0;
+  memset(options.http_host, 'x', sizeof options.http_host); /* no NUL inside the field */
+  CHECK_STATUS(ss_session_create_embedded(&options, &bad), SS_INVALID_ARGUMENT);
+  CHECK(strstr(ss_last_error_message(), "NUL") != NULL);
+  options.http_host[0] = '\0';
   CHECK_STATUS(ss_session_create_embedded(&options, &bad), SS_INVALID_ARGUMENT);
   CHECK(bad == NULL);
 
@@ -116,6 +148,26 @@ int main(void) {
   const ss_material bad_material = {-1.0, 0.3, 0.01, 2700.0};
   CHECK_STATUS(ss_session_upload(session, mesh, &bad_material, NULL, &again, NULL), SS_UNPROCESSABLE);
 
+  /* The precomputation, polled like a loading bar: progress in [0, 1], never going back. */
+  ss_geometry_status status;
+  char why[128] = "unset";
+  double last_progress = 0.0;
+  int monotone = 1, polls_until_ready = 0;
+  do {
+    CHECK_OK(ss_session_geometry_status(session, &id, &status, why, (int32_t)sizeof why));
+    monotone = monotone && status.progress >= last_progress && status.progress <= 1.0;
+    last_progress = status.progress;
+    if (status.status == SS_GEOMETRY_PRECOMPUTING) sleep_ms(1);
+  } while (status.status == SS_GEOMETRY_PRECOMPUTING && ++polls_until_ready < 30000);
+  CHECK(monotone);
+  CHECK(status.status == SS_GEOMETRY_READY && status.progress == 1.0 && why[0] == '\0');
+  CHECK(status.num_vertices == NV && status.num_faces == N * N && status.num_results == 0);
+  CHECK(atomic_load(&g_precompute_logs) == 1); /* the server's log reached the callback */
+  ss_geom_id unknown_id;
+  memset(&unknown_id, 3, sizeof unknown_id);
+  CHECK_STATUS(ss_session_geometry_status(session, &unknown_id, &status, NULL, 0), SS_NOT_FOUND);
+  CHECK_STATUS(ss_session_geometry_status(session, &id, NULL, NULL, 0), SS_INVALID_ARGUMENT);
+
   /* Pick with a ray from the hand. */
   ss_evaluator* ev = NULL;
   CHECK_OK(ss_evaluator_create(mesh, &ev));
@@ -129,6 +181,27 @@ int main(void) {
   int32_t hit = 0;
   CHECK_OK(ss_picker_pick(picker, &ray, 1, &pick, &hit));
   CHECK(hit == 1 && pick.status == SS_REFINE_CONVERGED);
+
+  /* The server's limit combination at the picked point is the local evaluator's stencil. */
+  int32_t local_count = 0, server_count = 0;
+  CHECK_OK(ss_evaluator_stencil(ev, &pick.point, NULL, NULL, NULL, NULL, 0, &local_count));
+  CHECK_OK(ss_session_limit_comb(session, &id, &pick.point, NULL, NULL, NULL, NULL, 0, &server_count));
+  CHECK(local_count == server_count && local_count >= 16 && local_count <= 64);
+  if (local_count == server_count && local_count <= 64) {
+    int32_t li[64], si[64];
+    double lw[64], sw[64], sdu[64];
+    CHECK_OK(ss_evaluator_stencil(ev, &pick.point, li, lw, NULL, NULL, 64, &local_count));
+    CHECK_OK(ss_session_limit_comb(session, &id, &pick.point, si, sw, sdu, NULL, 64, &server_count));
+    double worst = 0.0, sum = 0.0;
+    for (int32_t k = 0; k < local_count; ++k) {
+      CHECK(li[k] == si[k]);
+      worst = fmax(worst, fabs(lw[k] - sw[k]));
+      sum += sw[k];
+    }
+    CHECK(worst < 1e-12 && fabs(sum - 1.0) < 1e-12); /* and the weights form a partition of unity */
+  }
+  CHECK_STATUS(ss_session_limit_comb(session, &id, &pick.point, NULL, NULL, NULL, NULL, 1, &server_count),
+               SS_INVALID_ARGUMENT);
 
   /* Grab it and lift the hand by 3 cm. */
   ss_grab* grab = NULL;
@@ -207,7 +280,7 @@ int main(void) {
   /* The same through HTTP: a second in-process server with a listener, and a remote session. */
   ss_embedded_options listening;
   ss_embedded_options_default(&listening);
-  listening.http_host = "127.0.0.1";
+  listening.listen = 1;
   ss_session* host = NULL;
   CHECK_OK(ss_session_create_embedded(&listening, &host));
   int32_t port = 0;
@@ -250,6 +323,7 @@ int main(void) {
   ss_evaluator_destroy(ev);
   ss_mesh_destroy(mesh);
   ss_session_destroy(session);
+  CHECK_OK(ss_set_log_callback(NULL, NULL, SS_LOG_OFF));
   printf("c_api_session_test: %d checks, %d failures\n", g_checks, g_failures);
   return g_failures == 0 ? 0 : 1;
 }

@@ -2,9 +2,13 @@
 // destroying running operations) against a scripted test double, plus the bridge used by the
 // embedded server library. The whole-session test through a real server is c_api_session_test.c.
 
+#include <atomic>
 #include <cmath>
 #include <cstring>
+#include <mutex>
+#include <string>
 #include <thread>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -123,6 +127,81 @@ TEST(CApiSession, GuardMapsEveryFailureToAStatus) {
   std::string other;
   std::thread([&] { other = ss_last_error_message(); }).join();
   EXPECT_EQ(other, "");
+}
+
+// Operations destroyed while running finish in the background; a failure nobody read is logged.
+TEST(CApiSession, FailuresOfDestroyedOperationsAreLogged) {
+  static std::mutex mutex;
+  static std::vector<std::string> logged;
+  auto on_log = [](int32_t level, const char* message, void*) {
+    std::lock_guard lock(mutex);
+    if (level == SS_LOG_WARNING) logged.emplace_back(message);
+  };
+  ASSERT_EQ(ss_set_log_callback(on_log, nullptr, SS_LOG_DEBUG), SS_OK);
+  auto scripted = std::make_shared<test::ScriptedSession>();
+  ss_session* session = c_api::wrap_session(scripted);
+  ss_request* request = nullptr;
+  ASSERT_EQ(ss_request_create(&request), SS_OK);
+  const ss_geom_id id{};
+  ss_deformation* op = nullptr;
+  ASSERT_EQ(ss_session_deform_begin(session, &id, request, &op), SS_OK);
+  ss_deformation_destroy(op);  // still running: adopted
+  scripted->finish(0, false);
+  ASSERT_EQ(ss_session_deform_begin(session, &id, request, &op), SS_OK);  // purges the finished orphan
+  scripted->finish(1);
+  ss_deformation_destroy(op);
+  ss_request_destroy(request);
+  ss_session_destroy(session);
+  ASSERT_EQ(ss_set_log_callback(nullptr, nullptr, SS_LOG_OFF), SS_OK);
+  std::lock_guard lock(mutex);
+  ASSERT_EQ(logged.size(), 1u);
+  EXPECT_NE(logged[0].find("destroyed before it was read failed"), std::string::npos) << logged[0];
+  EXPECT_NE(logged[0].find("rigid-body"), std::string::npos) << logged[0];
+}
+
+// The handle table from several threads at once (also run under ThreadSanitizer): handles made,
+// used and destroyed concurrently, one shared handle read by all, and one destroyed while the
+// others use it: every call answers SS_OK or "destroyed", none crashes or sees another's object.
+TEST(CApiSession, HandlesAcrossThreads) {
+  ss_mesh* shared = grid_mesh();
+  ss_request* doomed = nullptr;
+  ASSERT_EQ(ss_request_create(&doomed), SS_OK);
+  std::atomic<int> bad{0};
+  std::atomic<bool> destroyed{false};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) {
+    threads.emplace_back([&, t] {
+      const ss_vec3 d{0, 0, double(t)};
+      for (int k = 0; k < 500; ++k) {
+        ss_request* mine = nullptr;
+        if (ss_request_create(&mine) != SS_OK) ++bad;
+        for (int c = 0; c <= k % 3; ++c) {
+          if (ss_request_add_vertex_constraint(mine, t, 4, &d) != SS_OK) ++bad;
+        }
+        int32_t vertex_constraints = -1;
+        if (ss_request_counts(mine, &vertex_constraints, nullptr, nullptr, nullptr, nullptr) != SS_OK ||
+            vertex_constraints != k % 3 + 1) {
+          ++bad;
+        }
+        int32_t nv = 0, nf = 0;
+        if (ss_mesh_counts(shared, &nv, &nf) != SS_OK || nv != 4 || nf != 1) ++bad;
+        const ss_status s = ss_request_counts(doomed, &vertex_constraints, nullptr, nullptr, nullptr, nullptr);
+        if (s != SS_OK && !(s == SS_INVALID_ARGUMENT && destroyed && std::strstr(ss_last_error_message(), "destroyed"))) {
+          ++bad;
+        }
+        if (t == 0 && k == 250) {
+          destroyed = true;
+          ss_request_destroy(doomed);
+        }
+        ss_request_destroy(mine);
+        if (ss_request_counts(mine, &vertex_constraints, nullptr, nullptr, nullptr, nullptr) != SS_INVALID_ARGUMENT) ++bad;
+      }
+    });
+  }
+  for (auto& thread : threads) thread.join();
+  EXPECT_EQ(bad.load(), 0);
+  EXPECT_EQ(ss_request_clear(doomed), SS_INVALID_ARGUMENT);
+  ss_mesh_destroy(shared);
 }
 
 }  // namespace

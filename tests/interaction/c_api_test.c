@@ -1,8 +1,9 @@
-/* The C ABI from plain C11: everything that does not need a server (meshes, limit evaluation,
- * tessellation, picking, requests, grab, floor, levels of detail, the error and buffer
- * conventions). The whole-session test is c_api_session_test.c. */
+/* The C ABI from plain C11: everything that does not need a server (version, generation-checked
+ * handles, the log callback, materials, meshes, limit evaluation, tessellation, picking, requests,
+ * grab, floor, levels of detail, the error and buffer conventions). The whole-session test is c_api_session_test.c. */
 
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -69,11 +70,100 @@ static ss_mesh* make_grid(int n) {
 
 static void test_version_and_status(void) {
   CHECK(ss_abi_version() == SS_ABI_VERSION);
+  CHECK(strcmp(ss_version(), SS_VERSION_STRING) == 0);
+  CHECK(ss_version_number() == SS_VERSION_NUMBER);
+  char expected[32];
+  snprintf(expected, sizeof expected, "%d.%d.%d", SS_VERSION_MAJOR, SS_VERSION_MINOR, SS_VERSION_PATCH);
+  CHECK(strcmp(ss_version(), expected) == 0);
   CHECK(strcmp(ss_status_name(SS_OK), "ok") == 0);
   CHECK(strcmp(ss_status_name(SS_UNPROCESSABLE), "unprocessable") == 0);
   CHECK(strcmp(ss_status_name(SS_BUFFER_TOO_SMALL), "buffer_too_small") == 0);
   CHECK(strcmp(ss_status_name(12345), "unknown_status") == 0);
   CHECK(ss_last_error_message() != NULL);
+}
+
+/* What the log callback received (this test logs from one thread only). */
+static int g_warnings = 0;
+static char g_last_log[512];
+static void on_log(int32_t level, const char* message, void* user_data) {
+  if (level == SS_LOG_WARNING) ++g_warnings;
+  snprintf(g_last_log, sizeof g_last_log, "%s", message);
+  ++*(int*)user_data;
+}
+
+/* Handles are generation-checked: a destroyed handle is recognised, also once its slot holds a
+ * new object, and destroying it again neither releases the new object nor crashes. */
+static void test_handles(void) {
+  int calls = 0;
+  CHECK_OK(ss_set_log_callback(on_log, &calls, SS_LOG_WARNING));
+  CHECK_STATUS(ss_set_log_callback(on_log, &calls, 7), SS_INVALID_ARGUMENT);
+  int32_t nv = 0, nf = 0;
+  ss_mesh* old = make_grid(1);
+  CHECK_OK(ss_mesh_counts(old, &nv, &nf));
+  ss_mesh_destroy(old);
+  CHECK_STATUS(ss_mesh_counts(old, &nv, &nf), SS_INVALID_ARGUMENT);
+  CHECK(strstr(ss_last_error_message(), "destroyed") != NULL);
+
+  ss_mesh* reused = make_grid(2); /* takes the freed slot: same index, next generation */
+  CHECK(reused != old);
+  CHECK_STATUS(ss_mesh_counts(old, &nv, &nf), SS_INVALID_ARGUMENT);
+  CHECK(strstr(ss_last_error_message(), "destroyed") != NULL);
+  CHECK(calls == 0);
+  ss_mesh_destroy(old); /* a second destroy: logged, the new mesh is untouched */
+  CHECK(g_warnings == 1 && strstr(g_last_log, "ss_mesh_destroy") != NULL);
+  CHECK_OK(ss_mesh_counts(reused, &nv, &nf));
+  CHECK(nv == 9 && nf == 4);
+
+  /* A handle of another kind, and values softshell never made. */
+  ss_evaluator* ev = NULL;
+  CHECK_OK(ss_evaluator_create(reused, &ev));
+  CHECK_STATUS(ss_mesh_counts((const ss_mesh*)ev, &nv, &nf), SS_INVALID_ARGUMENT);
+  CHECK(strstr(ss_last_error_message(), "is an ss_evaluator, not an ss_mesh") != NULL);
+  ss_mesh_destroy((ss_mesh*)ev); /* not a mesh: nothing released, logged */
+  CHECK(g_warnings == 2);
+  int32_t subfaces = 0;
+  CHECK_OK(ss_evaluator_num_subfaces(ev, 0, &subfaces));
+  CHECK_STATUS(ss_mesh_counts((const ss_mesh*)(uintptr_t)0x1, &nv, &nf), SS_INVALID_ARGUMENT);
+  CHECK(strstr(ss_last_error_message(), "not a handle made by softshell") != NULL);
+  CHECK_STATUS(ss_mesh_counts((const ss_mesh*)(uintptr_t)0x7fffffff, &nv, &nf), SS_INVALID_ARGUMENT);
+  ss_evaluator_destroy(ev);
+  ss_mesh_destroy(reused);
+
+  CHECK_OK(ss_set_log_callback(NULL, NULL, SS_LOG_OFF));
+  ss_mesh_destroy(reused); /* no callback: nothing logged */
+  CHECK(g_warnings == 2);
+}
+
+static void test_materials(void) {
+  ss_material m;
+  ss_material_default(&m);
+  CHECK(m.youngs_modulus == 6.9e10 && m.poisson_ratio == 0.33 && m.thickness == 0.001);
+  CHECK_OK(ss_material_check(&m));
+  m.poisson_ratio = 0.5;
+  CHECK_STATUS(ss_material_check(&m), SS_UNPROCESSABLE);
+  CHECK(strstr(ss_last_error_message(), "Poisson") != NULL);
+  CHECK_STATUS(ss_material_check(NULL), SS_INVALID_ARGUMENT);
+
+  CHECK_OK(ss_material_preset("Steel", 0.002, &m));
+  CHECK(m.youngs_modulus == 2.0e11 && m.poisson_ratio == 0.30 && m.thickness == 0.002 && m.density == 7850);
+  CHECK_STATUS(ss_material_preset("unobtainium", 0.001, &m), SS_INVALID_ARGUMENT);
+  CHECK(strstr(ss_last_error_message(), "known: aluminium") != NULL);
+  CHECK_STATUS(ss_material_preset("rubber", -1.0, &m), SS_INVALID_ARGUMENT);
+
+  const int32_t n = ss_material_preset_count();
+  CHECK(n == 11);
+  int found_rubber = 0;
+  for (int32_t i = 0; i < n; ++i) {
+    const char* name = NULL;
+    const char* description = NULL;
+    double yield = 0.0;
+    CHECK_OK(ss_material_preset_at(i, &name, &description, &m, &yield));
+    CHECK(name != NULL && description != NULL && strlen(description) > 0 && yield > 0.0);
+    CHECK_OK(ss_material_check(&m));
+    if (strcmp(name, "rubber") == 0) found_rubber = m.youngs_modulus == 5.0e6;
+  }
+  CHECK(found_rubber);
+  CHECK_STATUS(ss_material_preset_at(n, NULL, NULL, NULL, NULL), SS_INVALID_ARGUMENT);
 }
 
 static void test_mesh(void) {
@@ -498,6 +588,8 @@ static void test_sessions_need_handles(void) {
 
 int main(void) {
   test_version_and_status();
+  test_handles();
+  test_materials();
   test_mesh();
   test_evaluator();
   test_tessellation_and_picking();

@@ -48,6 +48,7 @@ class ScriptedSession : public Session {
     return std::optional<DeformationResult>(it->second);
   }
   Result<LimitComb> limit_comb(const GeomId&, const SurfacePoint&) override { return unsupported(); }
+  Result<StressField> stresses(const GeomId&, uint32_t, const StressQuery&) override { return unsupported(); }
 
   // Completes call k with a result of the geometry's size (or an error).
   void finish(size_t k, bool ok = true) {

@@ -324,20 +324,6 @@ TEST(WireRequestTest, HostileJsonBodies) {
   expect_invalid(wire::decode_request_json(R"({"surface_load": [0, 0, 1e400]})").error(), "invalid JSON");
 }
 
-TEST(WireRequestTest, ValidateRequestChecksIndicesAgainstTheMesh) {
-  DeformationRequest r = sample_request();
-  EXPECT_TRUE(wire::validate_request(r, 10));
-  expect_invalid(wire::validate_request(r, 9).error(), "refers to control point 9");
-  r.vertex_constraints[0].mask = 0;
-  expect_invalid(wire::validate_request(r, 10).error(), "mask");
-  DeformationRequest nan;
-  nan.pressure = std::nan("");
-  expect_invalid(wire::validate_request(nan, 10).error(), "pressure");
-  DeformationRequest point;
-  point.limit_constraints = {{{0, 0, -0.1, 0.5}, Vec3::Zero(), std::nullopt, std::nullopt}};
-  expect_invalid(wire::validate_request(point, 10).error(), "[0, 1]");
-}
-
 TEST(WireResultTest, RoundTrips) {
   DeformationResult r{42, {Vec3(0, 1, 2), Vec3(0.5, -0.25, 1e-3)}};
   auto bin = wire::encode_result_binary(r);
@@ -544,6 +530,61 @@ TEST(WireFuzzTest, MutatedBinaryBodiesNeverCrash) {
     if (auto d = wire::decode_request_json(json); !d) {
       ASSERT_TRUE(accept(d.error())) << d.error().message;
     }
+  }
+}
+
+}  // namespace
+}  // namespace softshell
+
+namespace softshell {
+namespace {
+
+TEST(WireStressTest, QueryAndFieldRoundTrip) {
+  StressQuery level;
+  level.level = 3;
+  level.yield_strength = 2.5e8;
+  auto q = wire::decode_stress_query_json(wire::encode_stress_query_json(level));
+  ASSERT_TRUE(q) << q.error().message;
+  EXPECT_EQ(q->level, 3);
+  EXPECT_EQ(q->yield_strength, 2.5e8);
+  StressQuery points;
+  points.points = {{4, 1, 0.25, 0.75}};
+  q = wire::decode_stress_query_json(wire::encode_stress_query_json(points));
+  ASSERT_TRUE(q) << q.error().message;
+  ASSERT_EQ(q->points.size(), 1u);
+  EXPECT_EQ(q->points[0].subface, 1);
+  EXPECT_EQ(q->points[0].v, 0.75);
+  EXPECT_FALSE(wire::decode_stress_query_json(R"({})").ok());
+  EXPECT_FALSE(wire::decode_stress_query_json(R"({"level": 5})").ok());
+  EXPECT_FALSE(wire::decode_stress_query_json(R"({"level": 2, "points": []})").ok());
+  EXPECT_FALSE(wire::decode_stress_query_json(R"({"level": 2, "colour": 1})").ok());
+  EXPECT_FALSE(wire::decode_stress_query_json(R"({"level": 2, "yield_strength": -1})").ok());
+
+  StressField field;
+  field.res_id = 7;
+  field.yield_strength = 1e6;
+  field.exceeds_yield = true;
+  StressSample s;
+  s.point = {2, 0, 0.5, 0.125};
+  s.position = Vec3(1, 2, 3);
+  s.membrane_force = Vec3(10, 20, -5);
+  s.bending_moment = Vec3(0.5, -0.25, 0.125);
+  s.von_mises_top = 3e6;
+  s.von_mises_bottom = 1e6;
+  field.max = s;
+  field.samples = {s, s};
+  field.samples[1].von_mises_top = 0.5;
+  for (bool with_points : {true, false}) {
+    auto back = wire::decode_stress_field_json(wire::encode_stress_field_json(field, with_points));
+    ASSERT_TRUE(back) << back.error().message;
+    EXPECT_EQ(back->res_id, 7u);
+    EXPECT_TRUE(back->exceeds_yield);
+    EXPECT_EQ(back->max.position, s.position);
+    EXPECT_EQ(back->max.point.v, 0.125);
+    ASSERT_EQ(back->samples.size(), 2u);
+    EXPECT_EQ(back->samples[1].von_mises_top, 0.5);
+    EXPECT_EQ(back->samples[0].bending_moment, s.bending_moment);
+    EXPECT_EQ(back->samples[0].point.face, with_points ? 2 : 0);
   }
 }
 

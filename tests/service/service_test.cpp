@@ -527,3 +527,73 @@ TEST(ServiceTest, ShutdownAnswersEverythingPromptly) {
 
 }  // namespace
 }  // namespace softshell::service
+
+namespace softshell::service {
+namespace {
+
+// Stresses of a stored result against the exact answer: every control point of a flat plate
+// moved by the affine field u = (eps x, 0, 0) is a uniform uniaxial strain, so everywhere
+// n11 = E t eps / (1 - nu^2), n22 = nu n11, n12 = 0, no bending, and von Mises
+// sigma11 sqrt(1 - nu + nu^2) on both faces.
+TEST(ServiceTest, StressesOfAStoredResultAreTheExactUniformStrainState) {
+  Service s(small_options());
+  const ControlMesh plate = test::make_grid(4, 3, 2.0, 1.5);
+  Material material;
+  material.youngs_modulus = 7e10;
+  material.poisson_ratio = 0.3;
+  material.thickness = 0.002;
+  auto up = s.upload(plate, material);
+  ASSERT_TRUE(up) << up.error().message;
+  ASSERT_EQ(s.wait_until_precomputed(up->id, milliseconds(30000))->status, GeometryStatus::kReady);
+  const double eps = 1e-4;
+  DeformationRequest stretch;
+  for (int32_t i = 0; i < plate.num_vertices(); ++i) {
+    stretch.vertex_constraints.push_back({i, kAxisAll, Vec3(eps * plate.positions()[static_cast<size_t>(i)].x(), 0, 0)});
+  }
+  auto stored = s.deform(up->id, stretch).get();
+  ASSERT_TRUE(stored) << stored.error().message;
+
+  const double n11 = material.youngs_modulus * material.thickness * eps / (1.0 - 0.09);
+  const double vm = n11 / material.thickness * std::sqrt(1.0 - 0.3 + 0.09);
+  auto check = [&](const StressSample& sample) {
+    EXPECT_NEAR(sample.membrane_force.x(), n11, 1e-8 * n11);
+    EXPECT_NEAR(sample.membrane_force.y(), 0.3 * n11, 1e-8 * n11);
+    EXPECT_NEAR(sample.membrane_force.z(), 0.0, 1e-8 * n11);
+    EXPECT_NEAR(sample.bending_moment.norm(), 0.0, 1e-8 * n11 * material.thickness);
+    EXPECT_NEAR(sample.von_mises_top, vm, 1e-8 * vm);
+    EXPECT_NEAR(sample.von_mises_bottom, vm, 1e-8 * vm);
+  };
+  StressQuery level;
+  level.level = 2;
+  level.yield_strength = 0.9 * vm;  // just below: the plate yields everywhere
+  auto field = s.stresses(up->id, (*stored)->res_id, level);
+  ASSERT_TRUE(field) << field.error().message;
+  EXPECT_EQ(field->res_id, (*stored)->res_id);
+  EXPECT_EQ(field->samples.size(), static_cast<size_t>((4 * 4 + 1) * (3 * 4 + 1)));  // the level-2 vertices
+  for (const StressSample& sample : field->samples) check(sample);
+  check(field->max);
+  EXPECT_TRUE(field->exceeds_yield);
+
+  StressQuery points;
+  points.points = {{0, 0, 0.5, 0.5}, {11, 0, 1.0, 0.0}};
+  field = s.stresses(up->id, (*stored)->res_id, points);
+  ASSERT_TRUE(field) << field.error().message;
+  ASSERT_EQ(field->samples.size(), 2u);
+  EXPECT_EQ(field->samples[1].point.face, 11);
+  for (const StressSample& sample : field->samples) check(sample);
+  EXPECT_FALSE(field->exceeds_yield) << "no yield strength given: never flagged";
+
+  // Clear refusals.
+  EXPECT_EQ(s.stresses(up->id, 99, points).error().code, ErrorCode::kNotFound);
+  EXPECT_EQ(s.stresses(GeomId{}, 1, points).error().code, ErrorCode::kNotFound);
+  level.level = 5;
+  EXPECT_EQ(s.stresses(up->id, 1, level).error().code, ErrorCode::kInvalidArgument);
+  points.points = {{12, 0, 0.5, 0.5}};
+  auto off = s.stresses(up->id, 1, points);
+  ASSERT_FALSE(off.ok());
+  EXPECT_EQ(off.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(off.error().message.find("stress point 0"), std::string::npos) << off.error().message;
+}
+
+}  // namespace
+}  // namespace softshell::service

@@ -37,11 +37,7 @@ int EmbeddedSession::port() const {
 
 Result<UploadResult> EmbeddedSession::upload(const ControlMesh& mesh, const Material& material,
                                              std::string_view name_space) {
-  try {
-    return service_->upload(mesh, material, std::string(name_space));
-  } catch (const std::bad_alloc&) {
-    return Error{ErrorCode::kResourceExhausted, "out of memory while copying the mesh"};
-  }
+  return capture([&] { return service_->upload(mesh, material, std::string(name_space)); }, "copying the mesh");
 }
 
 Result<std::vector<GeometryInfo>> EmbeddedSession::geometries() { return service_->geometries(); }
@@ -95,6 +91,10 @@ Result<std::optional<DeformationResult>> EmbeddedSession::latest_result(const Ge
 
 Result<LimitComb> EmbeddedSession::limit_comb(const GeomId& id, const SurfacePoint& point) {
   return service_->limit_comb(id, point);
+}
+
+Result<StressField> EmbeddedSession::stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) {
+  return service_->stresses(id, res_id, query);
 }
 
 }  // namespace softshell

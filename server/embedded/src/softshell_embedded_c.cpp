@@ -2,16 +2,43 @@
 
 #include "softshell/softshell_embedded_c.h"
 
+#include <cstddef>
+#include <cstring>
 #include <memory>
 #include <string>
+#include <string_view>
+#include <type_traits>
 
 #include "softshell/embedded_session.h"
 #include "softshell/softshell_c_bridge.h"
 
 extern "C" {
 
+// The layout C# and other bindings rely on (an ABI break if it changes: bump SS_ABI_VERSION).
+static_assert(sizeof(ss_embedded_options) == 80 && offsetof(ss_embedded_options, http_host) == 16);
+static_assert(std::is_trivially_copyable_v<ss_embedded_options> && std::is_standard_layout_v<ss_embedded_options>);
+
+static_assert(static_cast<int>(softshell::service::LogLevel::kDebug) == SS_LOG_DEBUG &&
+              static_cast<int>(softshell::service::LogLevel::kError) == SS_LOG_ERROR);
+
+namespace {
+
+// The service's log messages go to the C log callback (ss_set_log_callback).
+softshell::service::Logger c_logger() {
+  softshell::service::Logger logger;
+  logger.level = softshell::service::LogLevel::kDebug;  // the callback's threshold filters
+  logger.sink = [](softshell::service::LogLevel level, std::string_view message) {
+    softshell::c_api::log_message(static_cast<int32_t>(level), message);  // kDebug..kError = SS_LOG_*
+  };
+  return logger;
+}
+
+}  // namespace
+
 void ss_embedded_options_default(ss_embedded_options* out) {
-  if (out) *out = ss_embedded_options{0, 0, nullptr, 0};
+  if (out == nullptr) return;
+  *out = ss_embedded_options{};
+  std::memcpy(out->http_host, "127.0.0.1", sizeof("127.0.0.1"));
 }
 
 ss_status ss_session_create_embedded(const ss_embedded_options* options, ss_session** out_session) {
@@ -26,15 +53,30 @@ ss_status ss_session_create_embedded(const ss_embedded_options* options, ss_sess
       softshell::fail(ErrorCode::kInvalidArgument, "worker_threads must be in 0..1024 (0 = the number of cores)");
     }
     if (o.cache_mb < 0) softshell::fail(ErrorCode::kInvalidArgument, "cache_mb must not be negative");
-    if (o.http_host != nullptr && (o.http_port < 0 || o.http_port > 65535)) {
-      softshell::fail(ErrorCode::kInvalidArgument, "http_port must be in 0..65535, got " + std::to_string(o.http_port));
+    std::string host;
+    if (o.listen != 0) {
+      const void* nul = std::memchr(o.http_host, '\0', sizeof(o.http_host));
+      if (nul == nullptr) {
+        softshell::fail(ErrorCode::kInvalidArgument,
+                        "http_host is not NUL-terminated within its " + std::to_string(SS_HOST_CAPACITY) + " chars");
+      }
+      host = o.http_host;
+      if (host.empty()) softshell::fail(ErrorCode::kInvalidArgument, "listen is set but http_host is empty");
+      if (o.http_port < 0 || o.http_port > 65535) {
+        softshell::fail(ErrorCode::kInvalidArgument, "http_port must be in 0..65535, got " + std::to_string(o.http_port));
+      }
     }
     softshell::service::ServiceOptions service;
     service.solve_threads = o.worker_threads;
     service.precompute_threads = o.worker_threads;
     if (o.cache_mb > 0) service.cache_bytes = static_cast<size_t>(o.cache_mb) << 20;
+    service.logger = c_logger();
     auto session = std::make_shared<softshell::EmbeddedSession>(service);
-    if (o.http_host != nullptr) session->listen(o.http_host, o.http_port).value();
+    if (o.listen != 0) {
+      softshell::http::ServerOptions http;
+      http.logger = c_logger();
+      session->listen(host, o.http_port, http).value();
+    }
     *out_session = softshell::c_api::wrap_session(std::move(session));
   });
 }

@@ -1,8 +1,11 @@
 #include "factorization.h"
 
+#include <atomic>
 #include <chrono>
 #include <cstdlib>
+#include <cmath>
 #include <cstring>
+#include <limits>
 #include <mutex>
 #include <string>
 
@@ -42,28 +45,41 @@ cholmod_common* thread_common() {
 // A threaded OpenBLAS is also told to use one thread per call (unless OPENBLAS_NUM_THREADS says
 // otherwise): the service already runs solves in parallel, one per core, and BLAS threads on top
 // would only oversubscribe the cores (measured: 2 concurrent clients got less throughput than 1).
-bool blas_is_thread_unsafe() {
-  static const bool unsafe = [] {
-    using Query = int (*)();
-    auto query = reinterpret_cast<Query>(dlsym(RTLD_DEFAULT, "openblas_get_parallel"));
-    if (query != nullptr && query() != 0 && std::getenv("OPENBLAS_NUM_THREADS") == nullptr) {
-      using SetThreads = void (*)(int);
-      if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(1);
-    }
-    return query != nullptr && query() == 0;  // 0 = sequential build
-  }();
-  return unsafe;
+//
+// The probe runs once, when the engine library is loaded (BLAS is loaded before it, as CHOLMOD's
+// dependency), so no kernel ever calls dlsym or changes BLAS settings.
+struct BlasPolicy {
+  bool thread_unsafe = false;  // calls must take turns
+};
+
+BlasPolicy probe_blas() {
+  using Query = int (*)();
+  auto query = reinterpret_cast<Query>(dlsym(RTLD_DEFAULT, "openblas_get_parallel"));
+  if (query != nullptr && query() != 0 && std::getenv("OPENBLAS_NUM_THREADS") == nullptr) {
+    using SetThreads = void (*)(int);
+    if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(1);
+  }
+  return BlasPolicy{query != nullptr && query() == 0};  // 0 = sequential build
 }
 
+const BlasPolicy g_blas = probe_blas();
+std::mutex g_blas_mutex;
+
 std::unique_lock<std::mutex> blas_turn() {
-  static std::mutex mutex;
-  return blas_is_thread_unsafe() ? std::unique_lock<std::mutex>(mutex) : std::unique_lock<std::mutex>();
+  return g_blas.thread_unsafe ? std::unique_lock<std::mutex>(g_blas_mutex) : std::unique_lock<std::mutex>();
 }
+
+std::atomic<uint64_t> g_next_factor_id{1};
+
+// |K z|_i / (|K| |z|)_i up to which a pinned motion counts as zero-energy (round-off of a sum of
+// a few hundred terms, with margin).
+constexpr double kZeroEnergyResidual = 1e-11;
 
 }  // namespace
 
-Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned)
-    : fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
+Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
+                             const Eigen::MatrixXd& motions)
+    : id_(g_next_factor_id++), fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
   const auto start = std::chrono::steady_clock::now();
   const Eigen::SparseMatrix<double>& k = model.stiffness();
   const auto n = static_cast<size_t>(k.rows());
@@ -77,7 +93,10 @@ Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed
       factored_.push_back(static_cast<int32_t>(d));
     }
   }
-  if (factored_.empty()) return;  // everything fixed: nothing to factor
+  if (factored_.empty()) {  // everything fixed (or pinned): nothing to factor
+    compute_pin_block(model, motions);
+    return;
+  }
 
   // Upper triangle of K_aa in CSC (CHOLMOD stype = 1).
   size_t nnz = 0;
@@ -141,7 +160,58 @@ Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed
                        : l->nzmax * (sizeof(double) + int_size);
   bytes_ += 4 * l->n * int_size + n * sizeof(int32_t) + factored_.size() * sizeof(int32_t) +
             supernode_of_.size() * sizeof(int32_t);
+  compute_pin_block(model, motions);
+  bytes_ += static_cast<size_t>(pin_columns_.size() + pin_block_.size()) * sizeof(double) +
+            pin_position_.size() * sizeof(int32_t);
   factor_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+void Factorization::compute_pin_block(const ShellModel& model, const Eigen::MatrixXd& motions) {
+  const Eigen::SparseMatrix<double>& k = model.stiffness();
+  const auto na = static_cast<Eigen::Index>(factored_.size());
+  const auto nq = static_cast<Eigen::Index>(pinned_.size());
+  Eigen::MatrixXd kaq = Eigen::MatrixXd::Zero(na, nq);
+  Eigen::MatrixXd kqq = Eigen::MatrixXd::Zero(nq, nq);
+  pin_position_.assign(static_cast<size_t>(k.rows()), -1);
+  for (size_t q = 0; q < pinned_.size(); ++q) pin_position_[static_cast<size_t>(pinned_[q])] = static_cast<int32_t>(q);
+  for (Eigen::Index q = 0; q < nq; ++q) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(k, pinned_[static_cast<size_t>(q)]); it; ++it) {
+      if (const int32_t a = position_[static_cast<size_t>(it.row())]; a >= 0) {
+        kaq(a, q) = it.value();
+      } else if (const int32_t q2 = pin_position_[static_cast<size_t>(it.row())]; q2 >= 0) {
+        kqq(q2, q) = it.value();
+      }
+    }
+  }
+  pin_columns_ = nq ? forward(kaq) : Eigen::MatrixXd(na, 0);
+  pin_block_ = kqq;
+  pin_block_.noalias() -= pin_columns_.transpose() * pin_columns_;
+  // Are the pinned motions zero-energy to round-off? |K z|_i against (|K| |z|)_i on every DOF
+  // not fixed, for each motion (exact modes leave ~1e-16 .. 1e-14; a bending mode of a thin
+  // shell mistaken for one would leave ~1e-4).
+  pin_motion_residual_ = 0.0;
+  if (nq > 0 && motions.cols() == nq && motions.rows() == k.rows()) {
+    std::vector<char> fixed(static_cast<size_t>(k.rows()), 0);
+    for (int32_t d : fixed_) fixed[static_cast<size_t>(d)] = 1;
+    const Eigen::MatrixXd kz = k * motions;
+    Eigen::MatrixXd size = Eigen::MatrixXd::Zero(k.rows(), nq);
+    for (Eigen::Index j = 0; j < k.outerSize(); ++j) {
+      const Eigen::RowVectorXd z = motions.row(j).cwiseAbs();
+      if (z.isZero(0.0)) continue;
+      for (Eigen::SparseMatrix<double>::InnerIterator it(k, j); it; ++it) size.row(it.row()) += std::abs(it.value()) * z;
+    }
+    for (Eigen::Index i = 0; i < k.rows(); ++i) {
+      if (fixed[static_cast<size_t>(i)]) continue;
+      for (Eigen::Index q = 0; q < nq; ++q) {
+        const double r = std::abs(kz(i, q));
+        if (r > 0.0) pin_motion_residual_ = std::max(pin_motion_residual_, size(i, q) > 0.0 ? r / size(i, q) : 1.0);
+      }
+    }
+    pin_block_zeroed_ = pin_motion_residual_ <= kZeroEnergyResidual;
+  } else {
+    pin_block_zeroed_ = nq == 0;
+  }
+  if (pin_block_zeroed_) pin_block_.setZero();
 }
 
 Factorization::~Factorization() {
@@ -232,6 +302,96 @@ bool Factorization::sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& 
 
 Eigen::MatrixXd Factorization::backward(const Eigen::MatrixXd& y) const {
   return apply(CHOLMOD_Pt, apply(CHOLMOD_Lt, y));
+}
+
+SparseCholesky::SparseCholesky(const Eigen::SparseMatrix<double>& a) {
+  const auto n = static_cast<size_t>(a.rows());
+  if (n == 0) return;
+  size_t nnz = 0;
+  for (Eigen::Index j = 0; j < a.outerSize(); ++j) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(a, j); it; ++it) nnz += it.row() <= j;
+  }
+  cholmod_common* c = thread_common();
+  cholmod_sparse* m = cholmod_allocate_sparse(n, n, nnz, 1, 1, 1, CHOLMOD_REAL, c);
+  if (!m) fail(ErrorCode::kResourceExhausted, "not enough memory for the zero-mode analysis");
+  auto* mp = static_cast<int*>(m->p);
+  auto* mi = static_cast<int*>(m->i);
+  auto* mx = static_cast<double*>(m->x);
+  size_t pos = 0;
+  for (Eigen::Index j = 0; j < a.outerSize(); ++j) {
+    mp[j] = static_cast<int>(pos);
+    for (Eigen::SparseMatrix<double>::InnerIterator it(a, j); it; ++it) {
+      if (it.row() > j) continue;
+      mi[pos] = static_cast<int>(it.row());
+      mx[pos] = it.value();
+      ++pos;
+    }
+  }
+  mp[n] = static_cast<int>(pos);
+  cholmod_factor* l = nullptr;
+  bool ok = false;
+  {
+    const auto turn = blas_turn();
+    l = cholmod_analyze(m, c);
+    ok = l && cholmod_factorize(m, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
+  }
+  cholmod_free_sparse(&m, c);
+  const bool out_of_memory = c->status == CHOLMOD_OUT_OF_MEMORY;
+  if (!ok) {
+    if (l) cholmod_free_factor(&l, c);
+    if (out_of_memory) fail(ErrorCode::kResourceExhausted, "not enough memory for the zero-mode analysis");
+    return;
+  }
+  // The pivots: the squared diagonal of L (supernodal: the diagonal of each supernode's block).
+  double low = std::numeric_limits<double>::infinity();
+  const auto* x = static_cast<const double*>(l->x);
+  if (l->is_super) {
+    const auto* super = static_cast<const int*>(l->super);
+    const auto* pi = static_cast<const int*>(l->pi);
+    const auto* px = static_cast<const int*>(l->px);
+    for (size_t s = 0; s < l->nsuper; ++s) {
+      const int ncols = super[s + 1] - super[s], nrows = pi[s + 1] - pi[s];
+      for (int j = 0; j < ncols; ++j) low = std::min(low, x[px[s] + static_cast<ptrdiff_t>(j) * (nrows + 1)]);
+    }
+    low *= low;
+  } else {
+    const auto* p = static_cast<const int*>(l->p);
+    for (size_t j = 0; j < l->n; ++j) low = std::min(low, x[p[j]]);
+    if (l->is_ll) low *= low;  // LDL^T keeps D on the diagonal
+  }
+  factor_ = reinterpret_cast<cholmod_factor_struct*>(l);
+  min_pivot_ = low;
+}
+
+SparseCholesky::~SparseCholesky() {
+  if (factor_) {
+    auto* l = reinterpret_cast<cholmod_factor*>(factor_);
+    cholmod_free_factor(&l, thread_common());
+  }
+}
+
+Eigen::MatrixXd SparseCholesky::solve(const Eigen::MatrixXd& rhs) const {
+  if (!factor_) fail(ErrorCode::kInternal, "SparseCholesky::solve without a factor");
+  if (rhs.cols() == 0) return rhs;
+  cholmod_common* c = thread_common();
+  cholmod_dense b;
+  std::memset(&b, 0, sizeof b);
+  b.nrow = static_cast<size_t>(rhs.rows());
+  b.ncol = static_cast<size_t>(rhs.cols());
+  b.nzmax = b.nrow * b.ncol;
+  b.d = b.nrow;
+  b.x = const_cast<double*>(rhs.data());  // read only
+  b.xtype = CHOLMOD_REAL;
+  b.dtype = CHOLMOD_DOUBLE;
+  cholmod_dense* x = nullptr;
+  {
+    const auto turn = blas_turn();
+    x = cholmod_solve(CHOLMOD_A, reinterpret_cast<cholmod_factor*>(factor_), &b, c);
+  }
+  if (!x) fail(ErrorCode::kResourceExhausted, "not enough memory for the zero-mode analysis");
+  Eigen::MatrixXd out = Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(x->x), rhs.rows(), rhs.cols());
+  cholmod_free_dense(&x, c);
+  return out;
 }
 
 }  // namespace softshell::engine::internal

@@ -29,20 +29,38 @@ class FactorizationFailed : public Exception {
 
 class Factorization {
  public:
-  /// Factorizes K restricted to the DOFs neither fixed nor pinned. Throws
-  /// Exception(kUnprocessable) if that matrix is not positive definite.
-  Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned);
+  /// Factorizes K restricted to the DOFs neither fixed nor pinned. `motions` (3n x pins, zero on
+  /// the fixed DOFs): the free zero-energy motions the pins carry (see pin_block()). Throws
+  /// FactorizationFailed if that matrix is not positive definite.
+  Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
+                const Eigen::MatrixXd& motions);
   ~Factorization();
   Factorization(const Factorization&) = delete;
   Factorization& operator=(const Factorization&) = delete;
 
+  /// A process-unique id (the key of what is cached on top of this factor).
+  uint64_t id() const { return id_; }
   const std::vector<int32_t>& fixed() const { return fixed_; }
   const std::vector<int32_t>& pinned() const { return pinned_; }
   const std::vector<int32_t>& factored() const { return factored_; }
   /// Index of a DOF among the factored ones, or -1.
   int32_t position(int32_t dof) const { return position_[static_cast<size_t>(dof)]; }
+  /// Index of a DOF among the pinned ones, or -1.
+  int32_t pin_position(int32_t dof) const { return pin_position_[static_cast<size_t>(dof)]; }
   size_t bytes() const { return bytes_; }
   double factor_ms() const { return factor_ms_; }
+
+  /// The pins' part of every solve, computed once: Y_Q = L^-1 P K_aQ (factored x pins) and their
+  /// block of the Schur complement, K_QQ - Y_Q^T Y_Q. When the pins carry exact zero-energy
+  /// motions Z (K Z = 0 on every DOF not fixed), that block is exactly zero (K_aa^-1 K_aQ =
+  /// -Z_a Z_Q^-1, so it is (K Z)_Q Z_Q^-1), and what the subtraction leaves is cancellation noise
+  /// that would swamp the constraint rows next to it. It is set to zero only if K Z is at
+  /// round-off (`pin_block_zeroed()`); otherwise it is kept as computed.
+  const Eigen::MatrixXd& pin_columns() const { return pin_columns_; }
+  const Eigen::MatrixXd& pin_block() const { return pin_block_; }
+  bool pin_block_zeroed() const { return pin_block_zeroed_; }
+  /// Largest |K Z|_i / (|K| |Z|)_i over the DOFs not fixed (0 without pins).
+  double pin_motion_residual() const { return pin_motion_residual_; }
 
   /// The two halves of a solve with K_aa = P^T L L^T P (rows: factored DOFs; thread-safe):
   /// forward(B) = L^-1 P B and backward(Y) = P^T L^-T Y, so K_aa^-1 B = backward(forward(B)) and
@@ -62,11 +80,40 @@ class Factorization {
   // most half of the factor; false (and `x` untouched) otherwise.
   bool sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read) const;
 
-  std::vector<int32_t> fixed_, pinned_, factored_, position_;
+  void compute_pin_block(const ShellModel& model, const Eigen::MatrixXd& motions);
+
+  uint64_t id_ = 0;
+  std::vector<int32_t> fixed_, pinned_, factored_, position_, pin_position_;
+  Eigen::MatrixXd pin_columns_, pin_block_;
+  bool pin_block_zeroed_ = true;
+  double pin_motion_residual_ = 0.0;
   std::vector<int32_t> supernode_of_;  // per factor column, for a supernodal factor
   cholmod_factor_struct* factor_ = nullptr;
   size_t bytes_ = 0;
   double factor_ms_ = 0.0;
+};
+
+/// A CHOLMOD Cholesky factor of a general sparse symmetric matrix (the zero-mode analysis of the
+/// scalar surface Gram matrix). Not a failure when the matrix is not positive definite: `ok()`
+/// then says so. Thread-safe once built.
+class SparseCholesky {
+ public:
+  /// `a`: symmetric, both triangles or the upper one stored (only the upper one is read).
+  explicit SparseCholesky(const Eigen::SparseMatrix<double>& a);
+  ~SparseCholesky();
+  SparseCholesky(const SparseCholesky&) = delete;
+  SparseCholesky& operator=(const SparseCholesky&) = delete;
+
+  /// True if the factorization reached the end with positive pivots.
+  bool ok() const { return factor_ != nullptr; }
+  /// The smallest pivot (squared diagonal entry of L); 0 if !ok().
+  double min_pivot() const { return min_pivot_; }
+  /// A^-1 B (requires ok()).
+  Eigen::MatrixXd solve(const Eigen::MatrixXd& b) const;
+
+ private:
+  cholmod_factor_struct* factor_ = nullptr;
+  double min_pivot_ = 0.0;
 };
 
 }  // namespace softshell::engine::internal

@@ -9,9 +9,11 @@
 
 #include <Eigen/Dense>
 
+#include "softshell/executor.h"
+
 #include "kirchhoff_love.h"
-#include "parallel.h"
 #include "quadrature.h"
+#include "zero_modes.h"
 #include "request_check.h"
 
 namespace softshell::engine {
@@ -22,6 +24,7 @@ namespace {
 struct Element {
   std::vector<int32_t> indices;              // control points (unique)
   Eigen::MatrixXd stiffness;                 // 3m x 3m
+  Eigen::MatrixXd gram;                      // m x m: sum over points of w_q N_A N_B (parameter weights)
   Eigen::VectorXd area_weights;              // m: integral of N_A dA
   Eigen::Matrix3Xd normal_weights;           // 3 x m: integral of N_A n dA
   std::vector<QuadraturePoint> points;       // its quadrature points (parameter weights)
@@ -59,7 +62,8 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
   // The cells: dyadic toward extraordinary corners, then split where the parametrization is far
   // from uniform, one round of stencil evaluations per split level.
   std::vector<internal::Cell> cells, accepted, next;
-  internal::face_cells(quad.ev_refinement_levels, work.corner_mask, cells);
+  internal::face_cells(evaluator, work.face, work.subface, quad.gauss_points, quad.ev_refinement_levels,
+                       work.corner_mask, cells);
   std::vector<std::array<double, 2>> uvs;
   std::vector<double> weights;
   Eigen::MatrixXd basis;
@@ -80,7 +84,9 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
     }
     next.clear();
     for (size_t c = 0; c < cells.size(); ++c) {
-      if (cell_distortion(basis, x, static_cast<Eigen::Index>(c) * per_cell, per_cell) > quad.max_cell_distortion) {
+      // Cells at an extraordinary vertex are never uniform; their rule is made for them.
+      if (cells[c].ev_corner < 0 &&
+          cell_distortion(basis, x, static_cast<Eigen::Index>(c) * per_cell, per_cell) > quad.max_cell_distortion) {
         const auto quarters = internal::split(cells[c]);
         next.insert(next.end(), quarters.begin(), quarters.end());
       } else {
@@ -98,11 +104,13 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
   const auto m = x.rows();
 
   out.area_weights.setZero(m);
-  out.normal_weights.setZero(3, m);
   out.points.clear();
   out.area = 0.0;
   const double t = material.thickness;
   const double membrane = t, bending = t * t * t / 12.0;
+  std::vector<char> exact_load;  // cells at an extraordinary vertex: their pressure load exactly
+  out.normal_weights = internal::exact_corner_normal_weights(evaluator, work.face, work.subface, accepted, out.indices,
+                                                             exact_load);
   internal::SurfaceFrame frame;
   // K_e = sum over points of dA (Bm^T t C Bm + Bb^T t^3/12 C Bb). With C = L L^T, every term is
   // G_q^T G_q for G_q = [sqrt(dA t) L^T Bm; sqrt(dA t^3/12) L^T Bb]: the rows of all points are
@@ -127,13 +135,22 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
     internal::weighted_strain_rows(w, frame, std::sqrt(dA * membrane) * lt, std::sqrt(dA * bending) * lt,
                                    g.middleRows(static_cast<Eigen::Index>(6 * q), 6));
     out.area_weights.noalias() += dA * w.row(0).transpose();
-    out.normal_weights.noalias() += frame.a3 * (dA * w.row(0));
+    if (!exact_load[q / static_cast<size_t>(per_cell)]) out.normal_weights.noalias() += frame.a3 * (dA * w.row(0));
     out.area += dA;
     out.points.push_back({SurfacePoint{work.face, work.subface, uvs[q][0], uvs[q][1]}, weights[q]});
   }
   out.stiffness.setZero(3 * m, 3 * m);
   out.stiffness.selfadjointView<Eigen::Lower>().rankUpdate(g.transpose());
   out.stiffness.triangularView<Eigen::StrictlyUpper>() = out.stiffness.transpose();
+  // The Gram matrix of the basis at the points, with the parameter weights: independent of the
+  // geometry, the material and the thickness (it finds the motions that leave the surface where it is).
+  Eigen::MatrixXd values(static_cast<Eigen::Index>(uvs.size()), m);
+  for (size_t q = 0; q < uvs.size(); ++q) {
+    values.row(static_cast<Eigen::Index>(q)) = std::sqrt(weights[q]) * basis.row(static_cast<Eigen::Index>(6 * q));
+  }
+  out.gram.setZero(m, m);
+  out.gram.selfadjointView<Eigen::Lower>().rankUpdate(values.transpose());
+  out.gram.triangularView<Eigen::StrictlyUpper>() = out.gram.transpose();
 }
 
 // Connected components by shared control points (union-find), then 6 rigid modes each.
@@ -187,74 +204,6 @@ void compute_rigid_modes(const ControlMesh& mesh, std::vector<int32_t>& componen
       axis[a] = 1.0;
       modes.block<3, 1>(row, col + 3 + a) = axis.cross(r);
     }
-  }
-}
-
-// Zero-energy modes beyond the rigid ones, on components small enough for a dense eigensolver.
-// Appends them to `modes` and says for each whether the limit surface moves.
-void find_extra_zero_modes(const ShellModel& model, const Eigen::SparseMatrix<double>& k,
-                           const std::vector<int32_t>& component_of, const Eigen::MatrixXd& rigid,
-                           Eigen::MatrixXd& modes, std::vector<bool>& invisible) {
-  constexpr Eigen::Index kMaxDofs = 600;
-  const int32_t components = static_cast<int32_t>(rigid.cols() / 6);
-  std::vector<std::vector<int32_t>> dofs(static_cast<size_t>(components));
-  for (size_t v = 0; v < component_of.size(); ++v) {
-    for (int a = 0; a < 3; ++a) dofs[static_cast<size_t>(component_of[v])].push_back(static_cast<int32_t>(3 * v) + a);
-  }
-  std::vector<Eigen::VectorXd> extra;
-  for (int32_t c = 0; c < components; ++c) {
-    const auto& d = dofs[static_cast<size_t>(c)];
-    const auto m = static_cast<Eigen::Index>(d.size());
-    if (m > kMaxDofs) continue;
-    Eigen::MatrixXd kc = Eigen::MatrixXd::Zero(m, m);
-    for (Eigen::Index j = 0; j < m; ++j) {
-      for (Eigen::SparseMatrix<double>::InnerIterator it(k, d[static_cast<size_t>(j)]); it; ++it) {
-        const auto i = std::lower_bound(d.begin(), d.end(), static_cast<int32_t>(it.row())) - d.begin();
-        if (i < m && d[static_cast<size_t>(i)] == it.row()) kc(i, j) = it.value();
-      }
-    }
-    // Eigenvalues first (a few times cheaper): almost every component has just its six rigid
-    // modes, and then the eigenvectors are not needed.
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(kc, Eigen::EigenvaluesOnly);
-    const double top = eig.eigenvalues().cwiseAbs().maxCoeff();
-    Eigen::Index zero = 0;
-    while (zero < m && eig.eigenvalues()[zero] < 1e-10 * top) ++zero;
-    if (zero <= 6) continue;
-    eig.compute(kc, Eigen::ComputeEigenvectors);
-    // The null space minus the rigid modes of this component.
-    Eigen::MatrixXd r(m, 6);
-    for (Eigen::Index i = 0; i < m; ++i) r.row(i) = rigid.block(d[static_cast<size_t>(i)], 6 * c, 1, 6);
-    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(r);
-    const Eigen::MatrixXd q = qr.householderQ() * Eigen::MatrixXd::Identity(m, 6);
-    Eigen::MatrixXd null = eig.eigenvectors().leftCols(zero);
-    null -= q * (q.transpose() * null);
-    Eigen::JacobiSVD<Eigen::MatrixXd> svd(null, Eigen::ComputeThinU);
-    for (Eigen::Index s = 0; s < svd.singularValues().size(); ++s) {
-      if (svd.singularValues()[s] < 1e-6) break;
-      Eigen::VectorXd v = Eigen::VectorXd::Zero(k.rows());
-      for (Eigen::Index i = 0; i < m; ++i) v[d[static_cast<size_t>(i)]] = svd.matrixU()(i, s);
-      extra.push_back(v);
-    }
-  }
-  modes = rigid;
-  if (extra.empty()) return;
-  modes.conservativeResize(Eigen::NoChange, rigid.cols() + static_cast<Eigen::Index>(extra.size()));
-  for (size_t e = 0; e < extra.size(); ++e) modes.col(rigid.cols() + static_cast<Eigen::Index>(e)) = extra[e];
-  // Invisible if the limit displacement vanishes at every quadrature point of its component.
-  LimitStencil st;
-  for (const Eigen::VectorXd& v : extra) {
-    Eigen::Index first = 0;
-    v.cwiseAbs().maxCoeff(&first);
-    const int32_t component = component_of[static_cast<size_t>(first / 3)];
-    double moved = 0.0;
-    for (const QuadraturePoint& q : model.quadrature()) {
-      if (component_of[static_cast<size_t>(model.mesh().face(q.point.face)[0])] != component) continue;
-      model.evaluator().stencil(q.point, st);
-      Vec3 u = Vec3::Zero();
-      for (size_t a = 0; a < st.size(); ++a) u += st.position[a] * v.segment<3>(3 * st.indices[a]);
-      moved = std::max(moved, u.norm());
-    }
-    invisible.push_back(moved < 1e-9);
   }
 }
 
@@ -347,10 +296,20 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
     }
   }
   std::fill(k.valuePtr(), k.valuePtr() + nnz, 0.0);
+  // The scalar Gram matrix of the basis (zero-mode analysis), on the control-point pattern.
+  Eigen::SparseMatrix<double> gram(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
+  {
+    std::vector<int> starts(n + 1, 0);
+    for (size_t b = 0; b < n; ++b) starts[b + 1] = starts[b] + static_cast<int>(neighbours[b].size());
+    gram.resizeNonZeros(starts.back());
+    std::copy(starts.begin(), starts.end(), gram.outerIndexPtr());
+    for (size_t b = 0; b < n; ++b) std::copy(neighbours[b].begin(), neighbours[b].end(), gram.innerIndexPtr() + starts[b]);
+    std::fill(gram.valuePtr(), gram.valuePtr() + starts.back(), 0.0);
+  }
 
   // Elements in fixed-size batches: computed in parallel, accumulated in face order, so K is
   // bit-for-bit the same for any number of threads.
-  const int threads = internal::resolve_threads(options.threads);
+  Executor& executor = options.executor ? *options.executor : *default_executor();
   constexpr size_t kBatch = 128;
   std::vector<Element> batch(kBatch);
   Eigen::VectorXd area_weights = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(n));
@@ -360,9 +319,9 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
   for (size_t begin = 0; begin < work.size(); begin += kBatch) {
     if (options.cancel && options.cancel->load()) fail(ErrorCode::kCancelled, "precomputation cancelled");
     const size_t count = std::min(kBatch, work.size() - begin);
-    internal::parallel_for(0, static_cast<int64_t>(count), threads, [&](int64_t i) {
+    executor.parallel_for(0, static_cast<int64_t>(count), [&](int64_t i) {
       integrate_element(evaluator, material, quad, work[begin + static_cast<size_t>(i)], batch[static_cast<size_t>(i)]);
-    });
+    }, options.threads);
     for (size_t i = 0; i < count; ++i) {
       const Element& e = batch[i];
       const auto m = e.indices.size();
@@ -378,6 +337,7 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
               column[ii] += e.stiffness(static_cast<Eigen::Index>(3 * al) + ii, static_cast<Eigen::Index>(3 * bl) + j);
             }
           }
+          gram.valuePtr()[gram.outerIndexPtr()[b] + rank] += e.gram(static_cast<Eigen::Index>(al), static_cast<Eigen::Index>(bl));
         }
         area_weights[b] += e.area_weights[static_cast<Eigen::Index>(bl)];
         normal_weights.segment<3>(3 * b) += e.normal_weights.col(static_cast<Eigen::Index>(bl));
@@ -393,7 +353,8 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
     }
   }
   compute_rigid_modes(mesh, model->component_of_, model->rigid_modes_);
-  find_extra_zero_modes(*model, k, model->component_of_, model->rigid_modes_, model->zero_modes_, model->invisible_);
+  internal::check_surface_connected(smooth, evaluator, model->component_of_);
+  internal::find_extra_zero_modes(gram, model->component_of_, model->rigid_modes_, model->zero_modes_, model->invisible_);
   for (Eigen::Index mode = 0; mode < model->zero_modes_.cols(); ++mode) {
     Eigen::Index dof = 0;
     model->zero_modes_.col(mode).cwiseAbs().maxCoeff(&dof);

@@ -84,31 +84,13 @@ void write_result(const httplib::Request& req, httplib::Response& res, const ser
   }
 }
 
-Error describe(std::exception_ptr ep, const service::Logger& logger) {
-  try {
-    std::rethrow_exception(ep);
-  } catch (const Exception& e) {
-    if (e.code() == ErrorCode::kInternal) logger.error(std::string("handler failed: ") + e.what());
-    return e.error();
-  } catch (const std::bad_alloc&) {
-    logger.error("handler ran out of memory");
-    return Error{ErrorCode::kResourceExhausted, "the server ran out of memory while handling this request"};
-  } catch (const std::exception& e) {
-    logger.error(std::string("handler failed: ") + e.what());
-    return Error{ErrorCode::kInternal, std::string("internal error: ") + e.what()};
-  } catch (...) {
-    logger.error("handler failed with an unknown exception");
-    return Error{ErrorCode::kInternal, "internal error"};
-  }
-}
-
 httplib::Server::Handler Router::wrap(Endpoint endpoint, Handler fn) const {
   return [this, endpoint, fn = std::move(fn)](const httplib::Request& req, httplib::Response& res) {
     set_endpoint(endpoint);
     try {
       fn(req, res);
     } catch (...) {
-      set_error(res, describe(std::current_exception(), logger_));
+      set_error(res, describe(std::current_exception()));
     }
   };
 }

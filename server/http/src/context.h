@@ -128,15 +128,15 @@ bool wait_ready(const Context& c, const std::shared_future<T>& future, std::chro
   }
 }
 
-// An exception from a handler as the error to answer with (bugs are logged).
-Error describe(std::exception_ptr ep, const service::Logger& logger);
+// An exception from a handler as the error to answer with (bugs go to the SDK log sink).
+inline Error describe(std::exception_ptr ep) { return error_from(std::move(ep), "handling this request"); }
 
 // --- routing ----------------------------------------------------------------------------------
 
 class Router {
  public:
   using Handler = std::function<void(const httplib::Request&, httplib::Response&)>;
-  Router(httplib::Server& server, const service::Logger& logger) : server_(server), logger_(logger) {}
+  explicit Router(httplib::Server& server) : server_(server) {}
 
   void get(const char* pattern, Endpoint e, Handler h);
   void post(const char* pattern, Endpoint e, Handler h);
@@ -150,7 +150,6 @@ class Router {
   httplib::Server::Handler wrap(Endpoint e, Handler h) const;
 
   httplib::Server& server_;
-  const service::Logger& logger_;
   std::vector<std::pair<std::regex, std::string>> routes_;
 };
 

@@ -140,15 +140,17 @@ struct Topic {
   FramePtr frame_of(const ResultPtr& result, Clock::time_point stored, std::atomic<uint64_t>& serialized) {
     std::lock_guard lock(frame_mu);
     if (frame && frame->res_id >= result->res_id) return frame->res_id == result->res_id ? frame : nullptr;
-    std::string json;
-    try {
-      json = result->holds ? wire::encode_result_json(result->to_result(), *result->holds)
-                           : wire::encode_result_json(result->to_result());
-    } catch (const std::exception&) {
-      return nullptr;  // a stored result is finite; nothing else can fail here
-    }
+    // A stored result is finite, so only memory can fail here (logged by capture); the frame is
+    // then skipped and the next result tried.
+    auto json = capture(
+        [&] {
+          return result->holds ? wire::encode_result_json(result->to_result(), *result->holds)
+                               : wire::encode_result_json(result->to_result());
+        },
+        "encoding an event");
+    if (!json) return nullptr;
     std::string payload = "id: " + std::to_string(result->res_id) + "\nevent: result\ndata: ";
-    payload.append(json).append("\n\n");
+    payload.append(*json).append("\n\n");
     auto made = chunk(payload, result->res_id);
     made->stored = stored;
     frame = std::move(made);

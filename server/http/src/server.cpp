@@ -100,7 +100,7 @@ struct HttpServer::Impl {
     server.set_error_handler(httplib::Server::HandlerWithResponse(
         [this](const httplib::Request& req, httplib::Response& res) { return error_page(req, res); }));
     server.set_exception_handler([this](const httplib::Request&, httplib::Response& res, std::exception_ptr ep) {
-      internal::set_error(res, internal::describe(ep, ctx.options.logger));
+      internal::set_error(res, internal::describe(ep));
     });
     server.set_logger([this](const httplib::Request& req, const httplib::Response& res) { finished(req, res); });
 
@@ -225,7 +225,7 @@ struct HttpServer::Impl {
 
   internal::Listener server;
   internal::Context ctx;
-  internal::Router router{server, ctx.options.logger};
+  internal::Router router{server};
 
   std::mutex lifecycle_mu;
   std::thread thread;

@@ -57,7 +57,7 @@ class BatchSolver {
   Result<engine::Solution> solve(const HoldMap& holds, DeformationRequest* merged = nullptr) {
     ++solves_;
     AssembledHoldState state = assemble(holds);
-    auto solution = guarded([&] { return solve_hold_state(solver_, state); });
+    auto solution = capture([&] { return solve_hold_state(solver_, state); });
     if (solution) {
       if (!solution->displacement.allFinite()) {
         return Error{ErrorCode::kUnprocessable,
@@ -341,7 +341,7 @@ void Service::Impl::expire_hold(const std::weak_ptr<Entry>& weak, const std::str
 
 Result<HoldTicket> Service::put_hold(const GeomId& id, const std::string& hold_id, DeformationRequest request,
                                      HoldOptions options) {
-  return guarded([&]() -> Result<HoldTicket> {
+  return capture([&]() -> Result<HoldTicket> {
     if (impl_->stopping.load()) return shutdown_error();
     if (auto ok = wire::check_hold_id(hold_id); !ok) return ok.error();
     if (options.ttl.count() <= 0 || options.ttl > kMaxTtl) {
@@ -350,8 +350,7 @@ Result<HoldTicket> Service::put_hold(const GeomId& id, const std::string& hold_i
     }
     auto e = impl_->find(id);
     if (!e) return not_found(id);
-    if (auto ok = wire::validate_request(request, e->geometry->mesh.num_vertices()); !ok) return ok.error();
-    if (auto ok = impl_->check_surface_points(*e, request); !ok) return ok.error();
+    if (auto ok = impl_->validate(*e, request); !ok) return ok.error();
     auto made = make_hold_version(std::move(request), impl_->budget);
     if (!made) {
       impl_->refused_no_memory.fetch_add(1);
@@ -411,7 +410,7 @@ Result<HoldTicket> Service::put_hold(const GeomId& id, const std::string& hold_i
 }
 
 Result<HoldTicket> Service::release_hold(const GeomId& id, const std::string& hold_id) {
-  return guarded([&]() -> Result<HoldTicket> {
+  return capture([&]() -> Result<HoldTicket> {
     if (impl_->stopping.load()) return shutdown_error();
     if (auto ok = wire::check_hold_id(hold_id); !ok) return ok.error();
     auto e = impl_->find(id);

@@ -9,7 +9,10 @@
 
 #include "service_impl.h"
 #include "softshell/content_id.h"
+#include "softshell/engine/stresses.h"
 #include "softshell/mesh_validation.h"
+#include "softshell/request_validation.h"
+#include "softshell/tessellation.h"
 #include "softshell/wire.h"
 
 namespace softshell::service {
@@ -109,6 +112,20 @@ Result<void> check_namespace(std::string_view ns) {
 
 }  // namespace
 
+namespace {
+
+// Stress query points must lie on the limit surface; the message names the first that does not.
+Result<void> validate_points(const std::vector<SurfacePoint>& points, const LimitEvaluator& evaluator) {
+  for (size_t k = 0; k < points.size(); ++k) {
+    if (auto ok = evaluator.check(points[k]); !ok) {
+      return Error{ErrorCode::kInvalidArgument, "stress point " + std::to_string(k) + ": " + ok.error().message};
+    }
+  }
+  return {};
+}
+
+}  // namespace
+
 Service::Impl::Impl(const ServiceOptions& o)
     : options(o),
       cache(std::make_shared<engine::FactorCache>(o.cache_bytes)),
@@ -139,7 +156,7 @@ Result<LimitEvaluator> Service::Impl::evaluator(const Entry& e) const {
     ControlMesh smooth = e.geometry->mesh;
     smooth.creases().clear();
     smooth.corners().clear();
-    auto created = guarded([&] { return LimitEvaluator::create(smooth, options.precompute.evaluator); });
+    auto created = capture([&] { return LimitEvaluator::create(smooth, options.precompute.evaluator); });
     if (created) e.evaluator = std::move(*created);
     else e.evaluator_error = created.error();
   }
@@ -147,22 +164,16 @@ Result<LimitEvaluator> Service::Impl::evaluator(const Entry& e) const {
   return *e.evaluator;
 }
 
-Result<void> Service::Impl::check_surface_points(const Entry& e, const DeformationRequest& request) const {
-  // Surface points are checked against the limit surface now, not after the precomputation.
-  if (request.limit_constraints.empty() && request.surface_forces.empty()) return {};
-  auto ev = evaluator(e);
-  if (!ev) return ev.error();
-  auto check = [&](const SurfacePoint& p, const std::string& name) -> Result<void> {
-    if (auto ok = ev->check(p); !ok) return Error{ErrorCode::kInvalidArgument, name + ": " + ok.error().message};
-    return {};
-  };
-  for (size_t k = 0; k < request.limit_constraints.size(); ++k) {
-    if (auto ok = check(request.limit_constraints[k].point, "limit constraint " + std::to_string(k)); !ok) return ok;
+Result<void> Service::Impl::validate(const Entry& e, const DeformationRequest& request) const {
+  RequestContext context{e.geometry->mesh.num_vertices(), nullptr};
+  std::optional<LimitEvaluator> surface;
+  if (!request.limit_constraints.empty() || !request.surface_forces.empty()) {
+    auto made = evaluator(e);
+    if (!made) return made.error();
+    surface = std::move(*made);
+    context.evaluator = &*surface;
   }
-  for (size_t k = 0; k < request.surface_forces.size(); ++k) {
-    if (auto ok = check(request.surface_forces[k].point, "surface force " + std::to_string(k)); !ok) return ok;
-  }
-  return {};
+  return validate_request(request, context);
 }
 
 void Service::Impl::start_precompute(const std::shared_ptr<Entry>& e) {
@@ -180,7 +191,7 @@ void Service::Impl::start_precompute(const std::shared_ptr<Entry>& e) {
     opts.cancel = &stopping;
     precomputing_now.fetch_add(1);
     const auto start = Clock::now();
-    auto model = guarded([&] { return engine::ShellModel::build(g.mesh, g.material, opts); });
+    auto model = capture([&] { return engine::ShellModel::build(g.mesh, g.material, opts); });
     const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
     precomputing_now.fetch_sub(1);
     if (model && !*model) model = Error{ErrorCode::kInternal, "the precomputation returned no model"};
@@ -280,7 +291,7 @@ void Service::Impl::submit_solve(const std::shared_ptr<Entry>& e, std::shared_pt
       return;
     }
     const auto start = Clock::now();
-    auto solution = guarded([&] { return solver->solve(request); });
+    auto solution = capture([&] { return solver->solve(request); });
     if (!solution) {
       solves_failed.fetch_add(1);
       Error err = solution.error();
@@ -337,7 +348,7 @@ void Service::shutdown() {
 }
 
 Result<UploadResult> Service::upload(ControlMesh mesh, Material material, std::string name_space) {
-  return guarded([&] { return upload_checked(std::move(mesh), material, std::move(name_space)); });
+  return capture([&] { return upload_checked(std::move(mesh), material, std::move(name_space)); });
 }
 
 Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& material, std::string name_space) {
@@ -351,7 +362,7 @@ Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& m
   if (auto e = impl_->find(id)) return existing(*e);
 
   // New content: validate before storing anything.
-  if (auto ok = guarded([&] { return validate_mesh(mesh); }); !ok) return ok.error();
+  if (auto ok = capture([&] { return validate_mesh(mesh); }); !ok) return ok.error();
   if (auto ok = material.check(); !ok) return ok.error();
   const size_t bytes = mesh_bytes(mesh) + model_estimate(mesh);
 
@@ -415,9 +426,8 @@ void Service::deform(const GeomId& id, DeformationRequest request, DeformCallbac
   if (impl_->stopping.load()) return done(shutdown_error());
   auto e = impl_->find(id);
   if (!e) return done(not_found(id));
-  if (auto ok = wire::validate_request(request, e->geometry->mesh.num_vertices()); !ok) return done(ok.error());
 
-  if (auto ok = impl_->check_surface_points(*e, request); !ok) return done(ok.error());
+  if (auto ok = impl_->validate(*e, request); !ok) return done(ok.error());
 
   std::unique_lock lock(e->mu);
   if (impl_->stopping.load()) {
@@ -468,6 +478,51 @@ Result<ResultPtr> Service::result(const GeomId& id, uint32_t res_id) const {
   return e->results[res_id - 1];
 }
 
+Result<StressField> Service::stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) const {
+  if (query.level != 0 && (query.level < 1 || query.level > StressQuery::kMaxLevel)) {
+    return Error{ErrorCode::kInvalidArgument, "stresses: level " + std::to_string(query.level) +
+                                                  " is outside 1.." + std::to_string(StressQuery::kMaxLevel)};
+  }
+  if (!(query.yield_strength >= 0.0) || !std::isfinite(query.yield_strength)) {
+    return Error{ErrorCode::kInvalidArgument, "stresses: the yield strength must be a finite number >= 0 (Pa)"};
+  }
+  if (query.level == 0 && query.points.size() > StressQuery::kMaxPoints) {
+    return Error{ErrorCode::kInvalidArgument, "stresses: " + std::to_string(query.points.size()) +
+                                                  " points asked for, at most " +
+                                                  std::to_string(StressQuery::kMaxPoints) + " are served at once"};
+  }
+  auto stored = result(id, res_id);
+  if (!stored) return stored.error();
+  std::shared_ptr<const engine::ShellModel> model;
+  {
+    auto e = impl_->find(id);
+    std::lock_guard lock(e->mu);
+    model = e->model;  // a stored result implies a finished precomputation
+  }
+  if (!model) return Error{ErrorCode::kInternal, "stresses: geometry " + id.hex() + " has results but no model"};
+  return capture([&] {
+    const ControlMesh& mesh = model->mesh();
+    Eigen::VectorXd u(model->num_dofs());
+    for (int32_t i = 0; i < mesh.num_vertices(); ++i) {
+      u.segment<3>(3 * i) = (*stored)->positions[static_cast<size_t>(i)] - mesh.positions()[static_cast<size_t>(i)];
+    }
+    StressField field;
+    field.res_id = res_id;
+    field.yield_strength = query.yield_strength;
+    const engine::StressSummary summary = engine::max_stress(*model, u, field.yield_strength);
+    field.max = summary.max;
+    field.exceeds_yield = field.yield_strength > 0.0 && summary.exceeds_yield;
+    if (query.level > 0) {
+      const Tessellation tessellation = Tessellation::create(model->evaluator(), query.level).value();
+      field.samples = engine::evaluate_stresses(*model, u, tessellation.vertex_points());
+    } else {
+      if (auto ok = validate_points(query.points, model->evaluator()); !ok) return Result<StressField>(ok.error());
+      field.samples = engine::evaluate_stresses(*model, u, query.points);
+    }
+    return Result<StressField>(std::move(field));
+  }, "computing stresses");
+}
+
 Result<ResultPtr> Service::latest_result(const GeomId& id, uint32_t have, std::chrono::milliseconds wait,
                                          std::stop_token stop) const {
   auto e = impl_->find(id);
@@ -501,7 +556,7 @@ Result<LimitComb> Service::limit_comb(const GeomId& id, const SurfacePoint& poin
   auto evaluator = impl_->evaluator(*e);
   if (!evaluator) return evaluator.error();
   if (auto ok = evaluator->check(point); !ok) return ok.error();
-  return guarded([&]() -> Result<LimitComb> {
+  return capture([&]() -> Result<LimitComb> {
     LimitStencil s = evaluator->stencil(point);
     return LimitComb{point, std::move(s.indices), std::move(s.position), std::move(s.du), std::move(s.dv)};
   });

@@ -43,20 +43,6 @@ Error not_found(const GeomId& id);
 Error shutdown_error();
 Error no_room(const MemoryBudget& budget, size_t bytes, const std::string& what);
 
-// Runs `fn` (which returns a Result) and turns anything it throws into an error.
-template <class Fn>
-auto guarded(Fn&& fn) -> decltype(fn()) {
-  try {
-    return fn();
-  } catch (const Exception& e) {
-    return e.error();
-  } catch (const std::bad_alloc&) {
-    return Error{ErrorCode::kResourceExhausted, "out of memory"};
-  } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal, std::string("internal error: ") + e.what()};
-  }
-}
-
 using Pending = std::pair<DeformationRequest, Service::DeformCallback>;
 using HoldPromise = std::shared_ptr<std::promise<Result<HoldOutcome>>>;
 
@@ -157,8 +143,10 @@ struct Service::Impl {
   std::vector<std::shared_ptr<Entry>> all() const;
   // The limit evaluator of a geometry: the model's once built, before that one made on demand.
   Result<LimitEvaluator> evaluator(const Entry& e) const;
-  // kInvalidArgument if a surface point of the request is not on the geometry's limit surface.
-  Result<void> check_surface_points(const Entry& e, const DeformationRequest& request) const;
+  // The one validation of a request (validate_request) for this geometry, deformations and holds
+  // alike: indices against its control points, surface points against its limit surface (checked
+  // now, not after the precomputation). kInvalidArgument naming the first bad element.
+  Result<void> validate(const Entry& e, const DeformationRequest& request) const;
 
   void start_precompute(const std::shared_ptr<Entry>& e);
   void finish_precompute(const std::shared_ptr<Entry>& e, Result<std::shared_ptr<const engine::ShellModel>> model,

@@ -34,8 +34,9 @@ class EmbeddedSession final : public Session {
 
   /// Opens the HTTP API (PROTOCOL.md) on `host:port` (port 0 = any free port) so that other
   /// clients share this service. Returns the bound port. kUnavailable if it is open already or
-  /// the address cannot be bound.
-  Result<int> listen(const std::string& host = "0.0.0.0", int port = 0, http::ServerOptions options = {});
+  /// the address cannot be bound. The default host is loopback, as for softshell-server: pass
+  /// "0.0.0.0" (or an interface's address) to let other devices join.
+  Result<int> listen(const std::string& host = "127.0.0.1", int port = 0, http::ServerOptions options = {});
   /// Closes the listener (releases its long polls); the session keeps working. Idempotent.
   void stop_listening();
   /// The listening port, or 0.
@@ -57,6 +58,7 @@ class EmbeddedSession final : public Session {
   Result<std::optional<DeformationResult>> latest_result(const GeomId& id, uint32_t have,
                                                          std::chrono::milliseconds wait) override;
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) override;
+  Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) override;
 
  private:
   std::shared_ptr<service::Service> service_;

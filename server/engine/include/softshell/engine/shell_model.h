@@ -13,25 +13,34 @@
 
 #include "softshell/control_mesh.h"
 #include "softshell/deformation.h"
+#include "softshell/executor.h"
 #include "softshell/limit_evaluator.h"
 #include "softshell/material.h"
 #include "softshell/result.h"
 
 namespace softshell::engine {
 
-/// How the shell is integrated (see README "Quadrature" for the accuracy/cost table).
+/// How the shell is integrated (see README "Extraordinary vertices and quadrature" for the accuracy/cost tables).
 struct QuadratureOptions {
   /// Gauss points per direction on every (sub-)cell: 4 integrates a bicubic patch's stiffness
   /// integrand well (GeoPDEs uses p + 1). Range 1..10.
   int gauss_points = 4;
   /// Dyadic refinement levels of a face's domain toward an extraordinary vertex (0 = none). The
-  /// basis there is piecewise polynomial on sub-squares that shrink toward the vertex. Range 0..8.
-  int ev_refinement_levels = 3;
+  /// basis there is polynomial on rings of sub-squares that shrink toward the vertex: every ring
+  /// is integrated exactly (for the integrands that are polynomial), the innermost cell, which
+  /// holds the infinitely many rings below, by a Gauss rule re-weighted to integrate the
+  /// self-similar leading term exactly; its pressure load is integrated exactly in closed form.
+  /// What remains shrinks ~10x per level: the membrane patch test (exact answer: an affine
+  /// field) is met to 1e-8 with 4 levels, 2e-9 with 5, 6e-10 with 6, on flat meshes with
+  /// valence 3, 5, 6 and boundary extraordinary vertices and n-gons; each level costs 3 cells per
+  /// extraordinary corner (catmark_righthanded: +33% precompute). Range 0..8.
+  int ev_refinement_levels = 4;
   /// Cells whose parametrization is strongly non-uniform are split 2 x 2, up to
   /// `max_distortion_splits` times: those where the area element or the length of a tangent
   /// varies by more than this factor between the cell's Gauss points. Such faces appear where
-  /// tight support loops model a sharp edge; one Gauss rule over them is far from exact. >= 1;
-  /// 0 turns the splitting off.
+  /// tight support loops model a sharp edge; one Gauss rule over them is far from exact. (The
+  /// innermost cell at an extraordinary vertex, where the parametrization is singular, is never
+  /// split: its rule is made for it.) >= 1; 0 turns the splitting off.
   double max_cell_distortion = 4.0;
   /// Range 0..6.
   int max_distortion_splits = 3;
@@ -41,7 +50,9 @@ struct QuadratureOptions {
 struct PrecomputeOptions {
   QuadratureOptions quadrature;
   LimitEvaluator::Options evaluator;
-  /// Worker threads for the per-face work; 0 = std::thread::hardware_concurrency(). The result
+  /// Where the per-face work runs (the host's threads); empty = softshell::default_executor().
+  std::shared_ptr<Executor> executor;
+  /// At most this many of the executor's threads work on one build; 0 = all of them. The result
   /// is bit-for-bit the same for every thread count.
   int threads = 0;
   /// Called with the fraction done in [0, 1], from one of the worker threads. May be empty.
@@ -88,13 +99,19 @@ class ShellModel {
   /// (scaled by 1 / its size). K times any of them is zero up to round-off.
   const Eigen::MatrixXd& rigid_modes() const { return rigid_modes_; }
   /// Every zero-energy mode: the rigid modes (first 6c columns) followed by the extra modes of
-  /// the control mesh found on components of at most 600 DOFs (for example the checkerboard
-  /// pattern of a cube whose vertices all have valence 3, which Catmull-Clark maps to zero).
-  /// Orthonormal within each component; K times each is zero up to round-off.
+  /// the control mesh: displacements that leave a part's limit surface where it is (for example
+  /// the checkerboard pattern of a cube whose vertices all have valence 3, which Catmull-Clark
+  /// maps to zero). Found for every part on the Gram matrix of the basis at the quadrature
+  /// points, so they depend neither on the thickness nor on the material (a thin shell's bending
+  /// modes are never taken for zero modes). Extra modes are orthonormal within each component and
+  /// orthogonal to its rigid modes; K times each mode is zero up to round-off. `build` refuses a
+  /// part whose limit surface falls apart into pieces (possible with ghost faces), whose pieces
+  /// could move against each other without strain.
   const Eigen::MatrixXd& zero_energy_modes() const { return zero_modes_; }
   int32_t num_rigid_modes() const { return static_cast<int32_t>(rigid_modes_.cols()); }
   /// For each extra mode (column num_rigid_modes() + k): true if it leaves the limit surface where
-  /// it is (the solver then fixes its amplitude to zero when nothing else does).
+  /// it is (the solver then fixes its amplitude to zero when nothing else does). True for every
+  /// extra mode, by construction.
   const std::vector<bool>& invisible_modes() const { return invisible_; }
   /// The connected component each zero-energy mode (column of zero_energy_modes()) lives on.
   const std::vector<int32_t>& zero_energy_mode_component() const { return mode_component_; }
@@ -110,7 +127,7 @@ class ShellModel {
   double strain_energy(const Eigen::VectorXd& displacement) const;
 
   /// The load vector (3n) of a request's forces, surface forces, surface load and pressure.
-  /// Throws Exception(kInvalidArgument) for an index or surface point out of range.
+  /// Precondition: the loads pass `validate_request` (asserted: SOFTSHELL_ASSERT).
   Eigen::VectorXd load_vector(const DeformationRequest& request) const;
 
   /// Bytes held (matrix, quadrature, evaluator estimate).

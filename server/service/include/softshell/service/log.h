@@ -1,50 +1,17 @@
 #pragma once
 /// \file
-/// \brief `Logger`: the installable log sink of the server layers (service, HTTP, app).
-///
-/// Nothing in softshell writes to stdout/stderr on its own: every message goes through a
-/// `Logger`, whose sink the embedding application chooses (the executable installs
-/// `stderr_log_sink()`). An empty sink discards everything.
+/// \brief The server layers log through the SDK's `Logger` (softshell/log.h); these names keep the
+/// `service::` spelling the server's options use.
 
-#include <cstdint>
-#include <functional>
-#include <string>
-#include <string_view>
-
-#include "softshell/result.h"
+#include "softshell/log.h"
 
 namespace softshell::service {
 
-/// Severity, in increasing order; kOff as a threshold disables logging.
-enum class LogLevel : uint8_t { kDebug, kInfo, kWarning, kError, kOff };
-
-/// "debug", "info", "warning", "error", "off".
-std::string_view to_string(LogLevel level);
-/// Parses a level name (as above, case-insensitive; "warn" is accepted); kInvalidArgument otherwise.
-Result<LogLevel> parse_log_level(std::string_view name);
-
-/// Receives one complete message (no trailing newline). Called from any thread, possibly
-/// concurrently: a sink must be thread-safe.
-using LogSink = std::function<void(LogLevel level, std::string_view message)>;
-
-/// A sink that writes `2024-05-01T12:00:00.123Z info  message` lines to stderr, one write per
-/// line (lines of concurrent threads do not interleave).
-LogSink stderr_log_sink();
-
-/// A threshold and a sink. Copyable; copies share nothing mutable.
-/// Thread-safety: `log` may be called concurrently (the sink must allow it).
-struct Logger {
-  LogLevel level = LogLevel::kInfo;  ///< messages below this level are dropped
-  LogSink sink;                      ///< where messages go; empty = nowhere
-
-  bool enabled(LogLevel l) const { return sink && l >= level && level != LogLevel::kOff; }
-  void log(LogLevel l, std::string_view message) const {
-    if (enabled(l)) sink(l, message);
-  }
-  void debug(std::string_view m) const { log(LogLevel::kDebug, m); }
-  void info(std::string_view m) const { log(LogLevel::kInfo, m); }
-  void warning(std::string_view m) const { log(LogLevel::kWarning, m); }
-  void error(std::string_view m) const { log(LogLevel::kError, m); }
-};
+using softshell::LogLevel;
+using softshell::LogSink;
+using softshell::Logger;
+using softshell::parse_log_level;
+using softshell::stderr_log_sink;
+using softshell::to_string;
 
 }  // namespace softshell::service

@@ -39,6 +39,7 @@
 #include "softshell/service/log.h"
 #include "softshell/service/metrics.h"
 #include "softshell/session.h"
+#include "softshell/stresses.h"
 
 namespace softshell::service {
 
@@ -223,6 +224,11 @@ class Service {
   /// The limit point and tangents at `point` as combinations of control points (available
   /// while the geometry is still precomputing). kInvalidArgument for a bad point.
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) const;
+
+  /// Stresses of a stored result (softshell/stresses.h), computed on the calling thread:
+  /// kNotFound for an unknown geometry or result, kInvalidArgument for a bad query (level outside
+  /// 1..4, too many points, a point not on the surface).
+  Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) const;
 
   // --- holds (PROTOCOL.md version 2) --------------------------------------------------------
 

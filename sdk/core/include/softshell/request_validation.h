@@ -1,0 +1,38 @@
+#pragma once
+/// \file
+/// \brief The one validator of deformation requests, at the boundary: the service calls it once
+/// per request and the C ABI per added element, so every entry point rejects the same input with
+/// the same message. Code behind the boundary (the engine) asserts what it established.
+
+#include <cstdint>
+
+#include "softshell/deformation.h"
+#include "softshell/limit_evaluator.h"
+#include "softshell/result.h"
+
+namespace softshell {
+
+/// What a request is checked against. Parts left unknown are not checked (the C ABI checks each
+/// element when it is added, before the geometry is known).
+struct RequestContext {
+  static constexpr int32_t kUnknown = -1;
+  int32_t num_control_points = kUnknown;     ///< control point indices must be below this
+  const LimitEvaluator* evaluator = nullptr;  ///< surface points must lie on its limit surface
+};
+
+/// Ok, or kInvalidArgument naming the first bad element ("vertex constraint 3 has mask 0; ..."):
+/// a control point index out of range, a mask outside 1..7, Lagrange indices and coefficients of
+/// different counts, a non-finite number, a surface point outside [0, 1]² or not on the surface
+/// (face or sub-face out of range, a ghost face).
+Result<void> validate_request(const DeformationRequest& request, const RequestContext& context);
+
+/// The same checks for one element; `position` is its index in the request (for the message).
+Result<void> validate(const VertexConstraint& c, size_t position, const RequestContext& context);
+Result<void> validate(const LagrangeConstraint& c, size_t position, const RequestContext& context);
+Result<void> validate(const PointForce& f, size_t position, const RequestContext& context);
+Result<void> validate(const LimitConstraint& c, size_t position, const RequestContext& context);
+Result<void> validate(const SurfaceForce& f, size_t position, const RequestContext& context);
+/// The surface load and the pressure.
+Result<void> validate_loads(const Vec3& surface_load, double pressure);
+
+}  // namespace softshell

@@ -1,0 +1,12 @@
+# cmake -P script: fails if PROGRAM's runtime closure (ldd) loads any library named in FORBIDDEN.
+execute_process(COMMAND ldd ${PROGRAM} RESULT_VARIABLE rc OUTPUT_VARIABLE closure ERROR_VARIABLE err)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "ldd ${PROGRAM} failed (${rc}): ${err}")
+endif()
+foreach(name IN LISTS FORBIDDEN)
+  string(REGEX MATCH "[^\n]*${name}[.-][^\n]*" hit "${closure}")
+  if(hit)
+    message(FATAL_ERROR "${PROGRAM} loads ${name}:\n  ${hit}\nits closure:\n${closure}")
+  endif()
+endforeach()
+message(STATUS "${PROGRAM} loads none of: ${FORBIDDEN}")
