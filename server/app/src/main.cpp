@@ -35,6 +35,8 @@ options:
                        fit are refused with 507, nothing stored is ever dropped
   --max-body-mb B      largest request body in MiB (default 64); larger bodies get 413
   --max-connections C  open connections served at once, one thread each (default 1024)
+  --cors-origin O      let pages from origin O (e.g. http://localhost:3000, or *) call the API
+                       (CORS); repeatable; off by default
   --log-level L        debug, info, warning, error or off (default info); info logs one line
                        per request: method, path, status, microseconds
   --help               this text
@@ -95,6 +97,8 @@ int main(int argc, char** argv) {
       http_options.max_body_bytes = static_cast<size_t>(integer_arg(arg, value(), 1, 4096)) << 20;
     } else if (arg == "--max-connections") {
       http_options.max_connections = static_cast<int>(integer_arg(arg, value(), 8, 32768));
+    } else if (arg == "--cors-origin") {
+      http_options.cors_origins.push_back(value());
     } else if (arg == "--log-level") {
       auto parsed = service::parse_log_level(value());
       if (!parsed) usage_error(parsed.error().message);

@@ -13,6 +13,7 @@
 
 #include <httplib.h>
 
+#include "extensions.h"
 #include "softshell/http/negotiation.h"
 #include "softshell/service/metrics.h"
 #include "softshell/wire.h"
@@ -40,6 +41,9 @@ enum class Endpoint : int {
   kResultRequest,
   kLatest,
   kLimitComb,
+  kRender,
+  kStresses,
+  kApp,
   kUnmatched,
   kCount
 };
@@ -57,6 +61,9 @@ constexpr std::array<std::string_view, static_cast<size_t>(Endpoint::kCount)> kE
     "GET /geometries/{id}/results/{res_id}/request",
     "GET /geometries/{id}/latest_result",
     "GET /geometries/{id}/limit_comb",
+    "GET /geometries/{id}/render",
+    "GET|POST /geometries/{id}/results/{res_id}/stresses",
+    "GET /, /app/{file}",
     "unmatched",
 };
 
@@ -311,6 +318,14 @@ struct HttpServer::Impl {
     });
     get(R"(/geometries/([^/]+)/latest_result)", Endpoint::kLatest, [this](Req req, Res res) { latest(req, res); });
     get(R"(/geometries/([^/]+)/limit_comb)", Endpoint::kLimitComb, [this](Req req, Res res) { limit_comb(req, res); });
+    // The browser client's extensions (extensions.h).
+    get(R"(/geometries/([^/]+)/render)", Endpoint::kRender, [this](Req req, Res res) { internal::render_route(*service, req, res); });
+    get(R"(/geometries/([^/]+)/results/([^/]+)/stresses)", Endpoint::kStresses, [this](Req req, Res res) { internal::stresses_route(*service, req, res); });
+    post(R"(/geometries/([^/]+)/results/([^/]+)/stresses)", Endpoint::kStresses, [this](Req req, Res res) { internal::stresses_route(*service, req, res); });
+    get(R"(/|/index\.html|/app/[A-Za-z0-9._-]+)", Endpoint::kApp, [this](Req req, Res res) {
+      if (!internal::app_route(req, res)) throw Exception(ErrorCode::kNotFound, "no file " + req.path + " in the web app");
+    });
+    internal::install_cors(server, options.cors_origins);
   }
 
   template <class Fn>

@@ -16,6 +16,7 @@
 #include <cstddef>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "softshell/result.h"
 #include "softshell/service/log.h"
@@ -47,6 +48,10 @@ struct ServerOptions {
   /// `latest_result`'s `wait` default and upper bound (PROTOCOL.md: 25 and 60 seconds).
   double default_wait_seconds = 25.0;
   double max_wait_seconds = 60.0;
+  /// Origins allowed to call the API from pages served elsewhere (CORS; "*" = any origin):
+  /// preflight requests are answered and responses carry Access-Control-Allow-Origin. Empty
+  /// (the default): no CORS headers, browsers allow only same-origin pages (the app at /).
+  std::vector<std::string> cors_origins;
   /// Where request lines (`info`: method, path, status, microseconds) and handler failures
   /// (`error`) go.
   service::Logger logger;
