@@ -7,9 +7,9 @@ import { View, vec } from './view.js';
 const client = new Client('');
 const root = document.getElementById('root');
 const params = new URLSearchParams(location.search);
-// One name per browser tab (kept across reloads of the tab): the prefix of this tab's hold ids.
-const tab = sessionStorage.getItem('softshell-tab') ?? `tab-${Math.random().toString(36).slice(2, 10)}`;
-sessionStorage.setItem('softshell-tab', tab);
+// One name per page (a browser tab, or a frame): the prefix of its hold ids. A reload is a new
+// participant; the old one's holds are deleted on pagehide or end with their lease.
+const tab = `tab-${Math.random().toString(36).slice(2, 10)}`;
 
 // The SDK's material presets (sdk/core/src/material.cpp): E (Pa), nu, yield strength (Pa).
 const PRESETS = {

@@ -1,0 +1,236 @@
+// The web app in real headless Chromium (Debian's, WebGL on SwiftShader) against a real
+// softshell-server: it renders (pixels), follows other clients, pulls through holds, two pages
+// see each other, its picking and limit positions agree with the SDK, and a bad upload shows the
+// server's message. Screenshots go to docs/images (SOFTSHELL_SCREENSHOTS=0 skips them).
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { mkdirSync } from 'node:fs';
+import { join } from 'node:path';
+import { ApiError, Client, rows3 } from '../src/client.js';
+import { appPage, assetMesh, canvasPixels, launchChromium, repo, sdkProbe, sleep, startServer, until, waitReady } from './support/harness.js';
+
+let server, client, browser, id, rest, geometryJson;
+const LEVEL = 2;
+
+before(async () => {
+  server = await startServer();
+  client = new Client(server.url);
+  const mesh = assetMesh('spot_control_mesh.obj');
+  rest = mesh.vertices.flat();
+  ({ geom_id: id } = await client.upload(mesh));
+  await client.waitReady(id);
+  geometryJson = await (await fetch(`${server.url}/geometries/${id}`)).json();
+  browser = await launchChromium();
+});
+after(async () => {
+  await browser?.close();
+  await server?.stop();
+});
+
+const link = () => `${server.url}/?geometry=${id}&level=${LEVEL}`;
+
+async function openView() {
+  const p = await appPage(browser.context);
+  await p.page.goto(link());
+  await waitReady(p.page);
+  if (process.env.SOFTSHELL_TEST_EVENTS !== '0') await until(() => p.page.evaluate(() => window.softshell.state.connection === 'live'), { what: 'the event stream' });
+  return p;
+}
+
+// The canvas's position on the page, and a pixel (canvas coordinates) where the object is.
+async function objectPixel(page) {
+  return page.evaluate(() => {
+    const c = document.getElementById('view');
+    const r = c.getBoundingClientRect();
+    for (const [fx, fy] of [[0.5, 0.5], [0.5, 0.6], [0.45, 0.55], [0.55, 0.45]]) {
+      const x = Math.round(fx * r.width), y = Math.round(fy * r.height);
+      if (window.softshell.pickAt(x, y)?.hit) return { x, y, left: r.left, top: r.top };
+    }
+    return null;
+  });
+}
+
+// In-page snapshots of the canvas, compared in the page (no megabytes over the wire).
+const snap = (page, name) => page.evaluate((n) => {
+  const c = document.getElementById('view');
+  const t = document.createElement('canvas');
+  t.width = c.width; t.height = c.height;
+  t.getContext('2d').drawImage(c, 0, 0);
+  (window.__snaps ??= {})[n] = t.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+}, name);
+const changed = (page, a, b) => page.evaluate(([x, y]) => {
+  const p = window.__snaps[x], q = window.__snaps[y];
+  if (!p || !q || p.length !== q.length) return 1;
+  let n = 0;
+  for (let i = 0; i < p.length; i += 4) if (Math.abs(p[i] - q[i]) + Math.abs(p[i + 1] - q[i + 1]) + Math.abs(p[i + 2] - q[i + 2]) > 24) n++;
+  return n / (p.length / 4);
+}, [a, b]);
+
+async function drag(page, from, dx, dy, steps = 8) {
+  await page.mouse.move(from.left + from.x, from.top + from.y);
+  await page.mouse.down();
+  for (let i = 1; i <= steps; ++i) {
+    await page.mouse.move(from.left + from.x + (dx * i) / steps, from.top + from.y + (dy * i) / steps);
+    await sleep(40);
+  }
+}
+
+const holdsOf = async () => (await client.holds(id)).holds.map((h) => h.hold_id);
+
+test('the page renders the object (pixels, not only the DOM) without console errors', async () => {
+  const { page, errors } = await openView();
+  const px = await canvasPixels(page);
+  assert.ok(px.width > 100 && px.height > 100);
+  assert.ok(px.nonBackground > 0.03, `the canvas shows the object (${(100 * px.nonBackground).toFixed(1)}% of its pixels)`);
+  assert.ok(px.nonBackground < 0.9);
+  assert.equal(await page.evaluate(() => window.softshell.view.gl.isContextLost()), false);
+  const status = await page.textContent('#status');
+  assert.match(status, /result \d+/);
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
+test('a result posted by another client shows within a second', async () => {
+  const { page, errors } = await openView();
+  await snap(page, 'before');
+  // Another client clamps a point of the surface and moves it (a determined request).
+  const request = { limit_constraints: [{ face: 10, subface: 0, u: 0.5, v: 0.5, displacement: [0, 0.08, 0], du_displacement: [0, 0, 0], dv_displacement: [0, 0, 0] }] };
+  const posted = await client.deform(id, request);
+  const t0 = Date.now();
+  await until(() => page.evaluate((k) => window.softshell.state.resId === k, posted.res_id), { timeout: 1000, interval: 10, what: 'the result on the page' });
+  const ms = Date.now() - t0;
+  assert.ok(ms < 1000, `shown after ${ms} ms`);
+  await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+  await snap(page, 'after');
+  assert.ok(await changed(page, 'before', 'after') > 0.002, 'the picture changed');
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
+test('the limit positions the page draws agree with the SDK Tessellation to 1e-6 of the size', async () => {
+  const { page } = await openView();
+  const state = await page.evaluate(() => ({ positions: Array.from(window.softshell.state.surface.positions), control: Array.from(window.softshell.state.control) }));
+  const sdk = sdkProbe({ geometry: geometryJson, level: LEVEL, positions: rows3(state.control) });
+  assert.equal(state.positions.length, sdk.vertices.length);
+  let worst = 0;
+  for (let i = 0; i < sdk.vertices.length; ++i) worst = Math.max(worst, Math.abs(sdk.vertices[i] - state.positions[i]));
+  console.log(`# limit positions: worst difference ${(worst / sdk.size).toExponential(2)} of the object size`);
+  assert.ok(worst < 1e-6 * sdk.size, `worst ${worst} vs size ${sdk.size}`);
+  await page.close();
+});
+
+test('picking: the page and the SDK Picker give the same (face, subface, u, v) for the same rays', async () => {
+  const { page } = await openView();
+  const picks = await page.evaluate(() => {
+    const c = document.getElementById('view');
+    const out = [];
+    for (let i = 1; i < 12; ++i) for (let j = 1; j < 12; ++j) {
+      const p = window.softshell.pickAt((i / 12) * c.clientWidth, (j / 12) * c.clientHeight);
+      if (p?.hit) out.push({ ray: p.ray, triangle: p.hit.triangle, point: p.point });
+    }
+    return { picks: out, control: Array.from(window.softshell.state.control) };
+  });
+  assert.ok(picks.picks.length >= 10, `${picks.picks.length} pixels hit the object`);
+  const sdk = sdkProbe({ geometry: geometryJson, level: LEVEL, positions: rows3(picks.control), rays: picks.picks.map((p) => p.ray) });
+  let same = 0, worst = 0;
+  picks.picks.forEach((p, k) => {
+    const s = sdk.picks[k];
+    assert.ok(s.hit, `the SDK hits too at pick ${k}`);
+    if (s.triangle !== p.triangle) return; // a ray through a shared edge may take either side
+    same++;
+    assert.equal(p.point.face, s.face);
+    assert.equal(p.point.subface, s.subface);
+    worst = Math.max(worst, Math.abs(p.point.u - s.u), Math.abs(p.point.v - s.v));
+  });
+  console.log(`# picking: ${same}/${picks.picks.length} same triangle, worst (u, v) difference ${worst.toExponential(2)}`);
+  assert.ok(same >= 0.95 * picks.picks.length);
+  assert.ok(worst < 1e-5);
+  await page.close();
+});
+
+test('a drag creates a hold and the server stores deformations; release deletes it', async () => {
+  const { page, errors } = await openView();
+  const at = await objectPixel(page);
+  assert.ok(at, 'a pixel on the object');
+  const tab = await page.evaluate(() => window.softshell.tab);
+  const before = (await client.resultIds(id)).length;
+  await drag(page, at, 0, -60);
+  await until(async () => (await holdsOf()).includes(`${tab}-hand`), { what: 'the hold' });
+  await until(async () => (await client.resultIds(id)).length > before, { what: 'stored deformations' });
+  const held = await client.latestResult(id);
+  assert.ok(held.holds?.[`${tab}-hand`] >= 1, 'the newest result includes the hand');
+  const moved = held.positions.some((x, i) => Math.abs(x - rest[i]) > 1e-3);
+  assert.ok(moved, 'the object is deformed');
+  await page.mouse.up();
+  await until(async () => !(await holdsOf()).includes(`${tab}-hand`), { what: 'the release' });
+  const released = await until(async () => { const r = await client.latestResult(id); return !r.holds?.[`${tab}-hand`] && r; }, { what: 'the result without the hand' });
+  assert.ok(released.positions.every((x, i) => Math.abs(x - rest[i]) < 1e-9), 'back to the rest shape');
+  assert.match(await page.textContent('#status'), /latency \d+\.\d ms/);
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
+test('two pages on the same link: a drag in one changes the picture in the other', async () => {
+  const a = await openView();
+  const b = await openView();
+  await snap(b.page, 'before');
+  const at = await objectPixel(a.page);
+  await drag(a.page, at, 40, -50);
+  const tab = await a.page.evaluate(() => window.softshell.tab);
+  await until(() => b.page.evaluate((t) => !!window.softshell.state.holders && window.softshell.state.holders >= 1, tab), { what: 'the other page following' });
+  await b.page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+  await snap(b.page, 'after');
+  const diff = await changed(b.page, 'before', 'after');
+  assert.ok(diff > 0.002, `page B changed ${(100 * diff).toFixed(2)}% of its pixels`);
+  assert.match(await b.page.textContent('#status'), /1 holding/);
+  await a.page.mouse.up();
+  await until(async () => (await holdsOf()).length === 0, { what: 'the release' });
+  assert.deepEqual(a.errors, []);
+  assert.deepEqual(b.errors, []);
+  await a.page.close();
+  await b.page.close();
+});
+
+test('an upload of a bad OBJ shows the server message', async () => {
+  const { page } = await appPage(browser.context);
+  await page.goto(`${server.url}/`);
+  await page.waitForSelector('#geometries');
+  // Three faces on one edge: non-manifold, which the server refuses.
+  const obj = 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nf 1 2 3\nf 2 1 4\nf 1 2 5\n';
+  let expected = '';
+  try {
+    await client.upload({ vertices: [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1]], faces: [[0, 1, 2], [1, 0, 3], [0, 1, 4]],
+      material: { youngs_modulus: 6.9e10, poisson_ratio: 0.33, thickness: 0.001 } });
+  } catch (err) {
+    assert.ok(err instanceof ApiError);
+    expected = err.message;
+  }
+  assert.ok(expected.length > 10, 'the server refuses the mesh');
+  await page.setInputFiles('#obj-file', { name: 'bad.obj', mimeType: 'text/plain', buffer: Buffer.from(obj) });
+  await page.waitForFunction(() => document.getElementById('upload-error').textContent.length > 0);
+  const shown = await page.textContent('#upload-error');
+  assert.ok(shown.includes(expected), `shows "${shown}"`);
+  await page.close();
+});
+
+test('screenshots: two pages pulling one object, and the stress view', { skip: process.env.SOFTSHELL_SCREENSHOTS === '0' }, async () => {
+  const dir = join(repo, 'docs/images');
+  mkdirSync(dir, { recursive: true });
+  const page = await browser.context.newPage();
+  await page.setViewportSize({ width: 960, height: 420 });
+  await page.setContent(`<!doctype html><body style="margin:0;display:flex;gap:6px;background:#fff">
+    <iframe id="a" src="${link()}" style="width:477px;height:420px;border:0"></iframe>
+    <iframe id="b" src="${link()}&color=x" style="width:477px;height:420px;border:0"></iframe></body>`);
+  await sleep(300);
+  const [fa, fb] = ['a', 'b'].map((n) => page.frames().find((f) => f.name() === '' && f.url().includes('geometry') && f !== page.mainFrame() && (n === 'a' ? !f.url().includes('color') : f.url().includes('color'))));
+  for (const f of [fa, fb]) await waitReady(f);
+  await fb.selectOption('#color', 'displacement');
+  await fb.check('#ghost');
+  const at = await objectPixel(fa);
+  await drag(page, { ...at, left: at.left, top: at.top }, 50, -70);
+  await until(() => fb.evaluate(() => window.softshell.state.holders >= 1), { what: 'frame b following' });
+  await sleep(300);
+  await page.screenshot({ path: join(dir, 'browser-two-pages.png') });
+  await page.mouse.up();
+  await page.close();
+});
