@@ -116,8 +116,10 @@ async function viewPage(id) {
   const warn = el('div', { class: 'warn', id: 'warning', role: 'alert' });
   const legend = el('div', { class: 'legend', id: 'legend' });
   const level = el('select', { id: 'level', title: 'tessellation level' }, ...[1, 2, 3, 4].map((l) => el('option', { value: l, selected: l === Number(params.get('level') ?? 2) }, `level ${l}`)));
-  const color = el('select', { id: 'color' }, el('option', { value: 'none' }, 'plain'), el('option', { value: 'displacement' }, 'displacement'), el('option', { value: 'von_mises' }, 'von Mises'));
-  const ghost = el('input', { type: 'checkbox', id: 'ghost' });
+  const shading = params.get('color') ?? 'none';
+  const color = el('select', { id: 'color' }, ...[['none', 'plain'], ['displacement', 'displacement'], ['von_mises', 'von Mises']]
+    .map(([v, label]) => el('option', { value: v, selected: v === shading }, label)));
+  const ghost = el('input', { type: 'checkbox', id: 'ghost', checked: params.get('ghost') === '1' });
   const floor = el('input', { type: 'checkbox', id: 'floor' });
   const push = el('input', { type: 'checkbox', id: 'push-mode', title: 'drag pushes (a surface force) instead of grabbing; Shift does the same' });
   const undo = el('button', { id: 'undo', disabled: true }, '↶');
@@ -128,10 +130,11 @@ async function viewPage(id) {
     el('div', { class: 'stage' }, canvas, legend, warn), status));
 
   const view = new View(canvas);
+  view.showGhost = ghost.checked;
   const state = {
     id, geometry: null, material: null, yieldStrength: 0, surface: null, rest: null, restSurface: null,
     control: null, resId: 0, holders: 0, latency: null, connection: 'connecting', error: '',
-    pins: [], dragging: null, stress: null, undo: [], redo: [], history: [],
+    pins: [], dragging: null, stress: null, undo: [], redo: [], history: [], moveToScreen: [],
   };
   // For tests and tools: the page's state and its picking, readable from outside.
   window.softshell = { state, view, client, tab, pickAt: (x, y) => pick(x, y), ready: false };
@@ -296,11 +299,13 @@ async function viewPage(id) {
   // --- holds ------------------------------------------------------------------------------------
   // One PUT in flight per hold; a newer body waits and replaces any older waiting one.
   const senders = new Map();
-  function sendHold(name, body) {
+  // `at`: when the pointer event behind this body happened (for the pointer-to-screen times).
+  function sendHold(name, body, at = performance.now()) {
     const holdId = `${tab}-${name}`;
     let s = senders.get(holdId);
     if (!s) senders.set(holdId, (s = { busy: false, next: undefined, renew: null }));
     s.next = body;
+    s.at = at;
     clearInterval(s.renew);
     if (body !== null) s.renew = setInterval(() => { if (!s.busy) { s.next = s.last; pump(holdId, s); } }, 3000);
     pump(holdId, s);
@@ -308,6 +313,7 @@ async function viewPage(id) {
   async function pump(holdId, s) {
     if (s.busy || s.next === undefined) return;
     const body = s.next;
+    const at = s.at;
     s.next = undefined;
     s.busy = true;
     const start = performance.now();
@@ -316,8 +322,16 @@ async function viewPage(id) {
       s.last = body;
       state.latency = performance.now() - start;
       state.error = '';
-      if (!r.pending) onResult(r);
-      else showStatus();
+      if (!r.pending) {
+        onResult(r);
+        // Pointer event to the frame that shows its answer.
+        view.afterFrame(() => {
+          state.moveToScreen.push(performance.now() - at);
+          if (state.moveToScreen.length > 500) state.moveToScreen.shift();
+        });
+      } else {
+        showStatus();
+      }
     } catch (err) {
       if (!(body === null && err.status === 404)) fail(err);
     } finally {
@@ -417,15 +431,15 @@ async function viewPage(id) {
     } else if (gesture.kind === 'object') {
       if (!gesture.moved && Math.hypot(x - gesture.x0, y - gesture.y0) < 4) return;
       gesture.moved = true;
-      gesture.last = { x, y };
+      const at = performance.now();
       const comb = await gesture.comb;
       if (!comb || gesture.released) return;
-      moveHand(gesture, x, y, comb);
+      moveHand(gesture, x, y, comb, at);
     }
   });
   // The grabbed point follows the pointer in the plane through it facing the camera; a push's
   // force grows with the drag's length, along the view direction.
-  function moveHand(g, x, y, comb) {
+  function moveHand(g, x, y, comb, at) {
     const ray = view.camera.ray(x, y, canvas.clientWidth, canvas.clientHeight);
     const p = g.picked.point;
     if (!g.hand) {
@@ -437,7 +451,7 @@ async function viewPage(id) {
       const m = state.material;
       const D = (m.youngs_modulus * m.thickness ** 3) / (12 * (1 - m.poisson_ratio ** 2));
       const magnitude = (20 * D / state.size) * Math.min(1, Math.hypot(x - g.x0, y - g.y0) / 200);
-      sendHold('hand', { surface_forces: [{ face: p.face, subface: p.subface, u: p.u, v: p.v, force: vec.scale(g.hand.normal, magnitude) }] });
+      sendHold('hand', { surface_forces: [{ face: p.face, subface: p.subface, u: p.u, v: p.v, force: vec.scale(g.hand.normal, magnitude) }] }, at);
       return;
     }
     const n = g.hand.normal;
@@ -446,7 +460,7 @@ async function viewPage(id) {
     const t = vec.dot(vec.sub(g.hand.start, ray.origin), n) / denom;
     const target = vec.add(ray.origin, vec.scale(ray.direction, t));
     if (!g.clamp) g.clamp = clamp(comb, p, g.hand.start);  // tangents as shown when grabbed
-    sendHold('hand', { limit_constraints: [{ ...g.clamp, displacement: vec.sub(target, apply(comb, 'position', state.rest)) }] });
+    sendHold('hand', { limit_constraints: [{ ...g.clamp, displacement: vec.sub(target, apply(comb, 'position', state.rest)) }] }, at);
   }
   function release(g) {
     g.released = true;

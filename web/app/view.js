@@ -158,12 +158,19 @@ export class View {
     this.frames = 0;
     this.onFrame = null;
     this.dirty = true;
+    this.afterFrames = [];
     this.lines = gl.createBuffer();
     const loop = () => {
       if (this.dirty) this.draw();
       requestAnimationFrame(loop);
     };
     requestAnimationFrame(loop);
+  }
+
+  /** Calls `f` once the next frame has been drawn (after the draw calls were issued). */
+  afterFrame(f) {
+    this.afterFrames.push(f);
+    this.dirty = true;
   }
 
   makeMesh(triangles, count) {
@@ -304,5 +311,9 @@ export class View {
     gl.bindVertexArray(null);
     this.frames += 1;
     this.onFrame?.();
+    const after = this.afterFrames;
+    this.afterFrames = [];
+    if (after.length) gl.finish();  // their times include the rendering, not only its commands
+    for (const f of after) f();
   }
 }
