@@ -354,7 +354,7 @@ async function viewPage(id) {
     let minY = Infinity;
     for (let i = 1; i < X.length; i += 3) minY = Math.min(minY, X[i]);
     view.floorY = minY;
-    const tol = 1e-3 * state.size;
+    const tol = 5e-3 * state.size;  // 0.5% of the size: a cow stands on four hooves, not one
     const byFace = new Map();
     for (let i = 0; i < state.surface.vertexCount; ++i) {
       if (X[3 * i + 1] - minY > tol) continue;

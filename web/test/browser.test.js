@@ -170,6 +170,41 @@ test('a drag creates a hold and the server stores deformations; release deletes 
   await page.close();
 });
 
+test('a click pins and unpins; the floor toggle holds the object; undo and redo step through the history', async () => {
+  const { page, errors } = await openView();
+  const tab = await page.evaluate(() => window.softshell.tab);
+  // Start from a deformed shape posted by another client.
+  const request = { limit_constraints: [{ face: 10, subface: 0, u: 0.5, v: 0.5, displacement: [0, 0.05, 0], du_displacement: [0, 0, 0], dv_displacement: [0, 0, 0] }] };
+  const posted = await client.deform(id, request);
+  await until(() => page.evaluate((k) => window.softshell.state.resId >= k, posted.res_id), { what: 'the posted result' });
+  const at = await objectPixel(page);
+  await page.mouse.click(at.left + at.x, at.top + at.y);
+  await until(async () => (await holdsOf()).includes(`${tab}-pins`), { what: 'the pin hold' });
+  const pinned = await until(async () => { const r = await client.latestResult(id); return r.holds?.[`${tab}-pins`] && r; }, { what: 'the pinned result' });
+  // The pin holds the point where it was shown: the pinned shape differs from the posted one
+  // (which the pin alone does not reproduce), and undo brings the posted shape back.
+  await until(() => page.evaluate(() => !document.getElementById('undo').disabled), { what: 'undo enabled' });
+  await page.click('#undo');
+  const undone = await until(async () => { const r = await client.latestResult(id); return r.res_id > pinned.res_id && r; }, { what: 'the undo result' });
+  undone.positions.forEach((x, i) => assert.ok(Math.abs(x - posted.positions[i]) < 1e-9, 'undo restores the posted shape'));
+  assert.equal((await client.resultRequest(id, undone.res_id)).limit_constraints[0].face, 10);
+  await page.click('#redo');
+  const redone = await until(async () => { const r = await client.latestResult(id); return r.res_id > undone.res_id && r; }, { what: 'the redo result' });
+  redone.positions.forEach((x, i) => assert.ok(Math.abs(x - pinned.positions[i]) < 1e-9, 'redo restores the pinned shape'));
+  // Clicking the pin again removes it.
+  await page.mouse.click(at.left + at.x, at.top + at.y);
+  await until(async () => !(await holdsOf()).includes(`${tab}-pins`), { what: 'the unpin' });
+  // The floor: one hold of limit points under the object, held where they are.
+  await page.check('#floor');
+  await until(async () => (await holdsOf()).includes(`${tab}-floor`), { what: 'the floor hold' });
+  const floor = await client.hold(id, `${tab}-floor`);
+  assert.ok(floor.request.limit_constraints.length >= 3, `${floor.request.limit_constraints.length} floor contacts`);
+  await page.uncheck('#floor');
+  await until(async () => !(await holdsOf()).includes(`${tab}-floor`), { what: 'the floor released' });
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
 test('two pages on the same link: a drag in one changes the picture in the other', async () => {
   const a = await openView();
   const b = await openView();
@@ -189,6 +224,41 @@ test('two pages on the same link: a drag in one changes the picture in the other
   assert.deepEqual(b.errors, []);
   await a.page.close();
   await b.page.close();
+});
+
+test('a phone-sized page: a touch drag pulls the object, two fingers zoom', async () => {
+  const { page, errors } = await appPage(browser.context);
+  await page.setViewportSize({ width: 390, height: 740 });
+  await page.goto(link());
+  await waitReady(page);
+  await until(() => page.evaluate(() => window.softshell.state.connection === 'live'), { what: 'the event stream' });
+  const header = await page.evaluate(() => document.querySelector('header').getBoundingClientRect().height);
+  assert.ok(header < 120, `the controls fit (${header} px of header)`);
+  const at = await objectPixel(page);
+  const tab = await page.evaluate(() => window.softshell.tab);
+  const cdp = await browser.context.newCDPSession(page);
+  const touch = (type, points) => cdp.send('Input.dispatchTouchEvent', { type, touchPoints: points.map(([x, y], id) => ({ x, y, id })) });
+  const x = at.left + at.x, y = at.top + at.y;
+  await touch('touchStart', [[x, y]]);
+  for (let i = 1; i <= 8; ++i) {
+    await touch('touchMove', [[x, y - 6 * i]]);
+    await sleep(40);
+  }
+  await until(async () => (await holdsOf()).includes(`${tab}-hand`), { what: 'the touch hold' });
+  await touch('touchEnd', []);
+  await until(async () => !(await holdsOf()).includes(`${tab}-hand`), { what: 'the release' });
+  // Two fingers apart: the camera zooms in, no hold.
+  const d0 = await page.evaluate(() => window.softshell.view.camera.distance);
+  await touch('touchStart', [[150, 600], [240, 600]]);
+  for (let i = 1; i <= 6; ++i) {
+    await touch('touchMove', [[150 - 10 * i, 600], [240 + 10 * i, 600]]);
+    await sleep(30);
+  }
+  await touch('touchEnd', []);
+  const d1 = await page.evaluate(() => window.softshell.view.camera.distance);
+  assert.ok(d1 < d0, `zoomed in (${d0} -> ${d1})`);
+  assert.deepEqual(errors, []);
+  await page.close();
 });
 
 test('an upload of a bad OBJ shows the server message', async () => {
