@@ -535,8 +535,8 @@ async function viewPage(id) {
   window.addEventListener('resize', () => { view.dirty = true; });
   window.addEventListener('pagehide', () => {
     // Let go of everything this tab holds (the leases would end it within 10 s anyway).
-    for (const name of ['hand', 'pins', 'floor']) {
-      fetch(`/geometries/${id}/holds/${tab}-${name}`, { method: 'DELETE', keepalive: true }).catch(() => {});
+    for (const [holdId, s] of senders) {
+      if (s.last) fetch(`/geometries/${id}/holds/${holdId}`, { method: 'DELETE', keepalive: true }).catch(() => {});
     }
   });
 
