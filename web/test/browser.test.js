@@ -289,18 +289,29 @@ test('screenshots: two pages pulling one object, and the stress view', { skip: p
   const page = await browser.context.newPage();
   await page.setViewportSize({ width: 960, height: 420 });
   await page.setContent(`<!doctype html><body style="margin:0;display:flex;gap:6px;background:#fff">
-    <iframe id="a" src="${link()}" style="width:477px;height:420px;border:0"></iframe>
-    <iframe id="b" src="${link()}&color=x" style="width:477px;height:420px;border:0"></iframe></body>`);
-  await sleep(300);
-  const [fa, fb] = ['a', 'b'].map((n) => page.frames().find((f) => f.name() === '' && f.url().includes('geometry') && f !== page.mainFrame() && (n === 'a' ? !f.url().includes('color') : f.url().includes('color'))));
+    <iframe name="a" src="${link()}" style="width:477px;height:420px;border:0"></iframe>
+    <iframe name="b" src="${link()}&color=displacement&ghost=1" style="width:477px;height:420px;border:0"></iframe></body>`);
+  const fa = await until(() => page.frame({ name: 'a' }), { what: 'frame a' });
+  const fb = await until(() => page.frame({ name: 'b' }), { what: 'frame b' });
   for (const f of [fa, fb]) await waitReady(f);
-  await fb.selectOption('#color', 'displacement');
-  await fb.check('#ghost');
-  const at = await objectPixel(fa);
-  await drag(page, { ...at, left: at.left, top: at.top }, 50, -70);
+  // Frame a stands the cow on the floor and pulls its head sideways; frame b follows.
+  await fa.check('#floor');
+  await until(async () => (await holdsOf()).some((h) => h.endsWith('-floor')), { what: 'the floor' });
+  const head = await fa.evaluate(() => {
+    const c = document.getElementById('view');
+    const r = c.getBoundingClientRect();
+    for (let y = 0.15; y < 0.9; y += 0.02) for (let x = 0.3; x < 0.7; x += 0.02) {
+      const px = Math.round(x * r.width), py = Math.round(y * r.height);
+      if (window.softshell.pickAt(px, py)?.hit) return { x: px, y: py + 6, left: r.left, top: r.top };
+    }
+    return null;
+  });
+  await drag(page, head, 45, 10, 10);
   await until(() => fb.evaluate(() => window.softshell.state.holders >= 1), { what: 'frame b following' });
   await sleep(300);
   await page.screenshot({ path: join(dir, 'browser-two-pages.png') });
   await page.mouse.up();
+  await fa.uncheck('#floor');
+  await until(async () => (await holdsOf()).length === 0, { what: 'the floor released' });
   await page.close();
 });
