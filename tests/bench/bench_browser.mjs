@@ -12,7 +12,7 @@ const client = new Client(server.url);
 const browser = await launchChromium();
 const rows = [];
 try {
-  for (const name of ['spot_control_mesh.obj', 'spot_quadrangulated.obj']) {
+  for (const name of (process.env.BENCH_MESHES ?? 'spot_control_mesh.obj,spot_quadrangulated.obj').split(',')) {
     const mesh = assetMesh(name);
     const { geom_id: id } = await client.upload(mesh);
     const t0 = performance.now();
@@ -75,6 +75,12 @@ try {
     }
     await sleep(300);
     const times = await page.evaluate(() => window.softshell.state.moveToScreen.slice().sort((a, b) => a - b));
+    const puts = await page.evaluate(() => window.softshell.state.latencies.slice().sort((a, b) => a - b));
+    const frameMs = await page.evaluate(async () => {
+      const v = window.softshell.view, t0 = performance.now(), f0 = v.frames;
+      await new Promise((done) => { const spin = () => { v.camera.orbit(1, 0); v.dirty = true; if (performance.now() - t0 < 2000) requestAnimationFrame(spin); else done(); }; requestAnimationFrame(spin); });
+      return (performance.now() - t0) / (v.frames - f0);
+    });
     await page.mouse.up();
     await sleep(300);
     await page.close();
@@ -85,6 +91,8 @@ try {
       bytes_update_binary: 4 + 12 * V, bytes_update_event_json: eventJson.length,
       bytes_level2_triangulation: l2.vertices * 24, level2_vertices: l2.vertices,
       render_table_mb: `${(tableBytes[2] / 1e6).toFixed(2)} (L2), ${(tableBytes[3] / 1e6).toFixed(2)} (L3)`,
+      put_ms: puts.length ? `p50 ${puts[Math.floor(puts.length / 2)].toFixed(1)}, p95 ${puts[Math.floor(0.95 * puts.length)].toFixed(1)}` : 'none',
+      frame_ms_level2: frameMs.toFixed(1),
       move_to_screen_ms: times.length ? `p50 ${q(0.5).toFixed(1)}, p95 ${q(0.95).toFixed(1)} (${times.length} moves)` : 'none',
       console_errors: errors.length,
     });

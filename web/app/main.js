@@ -130,11 +130,12 @@ async function viewPage(id) {
     el('div', { class: 'stage' }, canvas, legend, warn), status));
 
   const view = new View(canvas);
+  view.onFrame = () => { state.drawnResId = state.shownResId; };
   view.showGhost = ghost.checked;
   const state = {
     id, geometry: null, material: null, yieldStrength: 0, surface: null, rest: null, restSurface: null,
     control: null, resId: 0, holders: 0, latency: null, connection: 'connecting', error: '',
-    pins: [], dragging: null, stress: null, undo: [], redo: [], history: [], moveToScreen: [],
+    pins: [], dragging: null, stress: null, undo: [], redo: [], history: [], moveToScreen: [], latencies: [], shownResId: 0, drawnResId: 0,
   };
   // For tests and tools: the page's state and its picking, readable from outside.
   window.softshell = { state, view, client, tab, pickAt: (x, y) => pick(x, y), ready: false };
@@ -194,6 +195,7 @@ async function viewPage(id) {
     if (!state.surface) return;
     const { positions, normals } = state.surface.evaluate(state.control);
     view.setShape(positions, normals);
+    state.shownResId = state.resId;
     const n = state.surface.vertexCount;
     let maxDisp = 0;
     const disp = new Float32Array(n);
@@ -249,7 +251,8 @@ async function viewPage(id) {
 
   // A new result (from the events stream, or the answer to one of our own requests).
   function onResult(r) {
-    if (r.res_id < state.resId) return;
+    // The answer to our own PUT and the event stream bring the same result: draw it once.
+    if (r.res_id <= state.resId && state.resId > 0) return;
     state.resId = r.res_id;
     state.control = r.positions;
     if (r.holds) {
@@ -321,14 +324,18 @@ async function viewPage(id) {
       const r = body === null ? await client.deleteHold(id, holdId) : await client.putHold(id, holdId, body, { ttl: 10, wait: 10 });
       s.last = body;
       state.latency = performance.now() - start;
+      state.latencies.push(state.latency);
+      if (state.latencies.length > 500) state.latencies.shift();
       state.error = '';
       if (!r.pending) {
         onResult(r);
-        // Pointer event to the frame that shows its answer.
-        view.afterFrame(() => {
+        // Pointer event to the first frame on screen that shows its answer (or a newer result).
+        const record = () => {
           state.moveToScreen.push(performance.now() - at);
           if (state.moveToScreen.length > 500) state.moveToScreen.shift();
-        });
+        };
+        if (state.drawnResId >= r.res_id) requestAnimationFrame(record);
+        else view.afterFrame(record, false);
       } else {
         showStatus();
       }

@@ -167,10 +167,10 @@ export class View {
     requestAnimationFrame(loop);
   }
 
-  /** Calls `f` once the next frame has been drawn (after the draw calls were issued). */
-  afterFrame(f) {
+  /** Calls `f` once the next frame has been drawn (`redraw`: draw one even if nothing changed). */
+  afterFrame(f, redraw = true) {
     this.afterFrames.push(f);
-    this.dirty = true;
+    if (redraw) this.dirty = true;
   }
 
   makeMesh(triangles, count) {
@@ -313,7 +313,7 @@ export class View {
     this.onFrame?.();
     const after = this.afterFrames;
     this.afterFrames = [];
-    if (after.length) gl.finish();  // their times include the rendering, not only its commands
-    for (const f of after) f();
+    // At the next frame's start this one has been composited: what "on screen" means here.
+    if (after.length) requestAnimationFrame(() => { for (const f of after) f(); });
   }
 }
