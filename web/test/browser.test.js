@@ -283,6 +283,53 @@ test('an upload of a bad OBJ shows the server message', async () => {
   await page.close();
 });
 
+test('a page served from another origin uses the API with --cors-origin (and cannot without it)', async () => {
+  const http = await import('node:http');
+  const site = http.createServer((req, res) => {
+    res.writeHead(200, { 'Content-Type': 'text/html' });
+    res.end('<!doctype html><title>elsewhere</title>');
+  });
+  await new Promise((r) => site.listen(0, '127.0.0.1', r));
+  const origin = `http://127.0.0.1:${site.address().port}`;
+  const open = await startServer(['--cors-origin', origin]);
+  try {
+    const c = new Client(open.url);
+    const { geom_id: gid } = await c.upload(assetMesh('spot_control_mesh.obj'));
+    await c.waitReady(gid);
+    const { page, errors } = await appPage(browser.context);
+    await page.goto(origin + '/');
+    const body = { limit_constraints: [{ face: 10, subface: 0, u: 0.5, v: 0.5, displacement: [0, 0.01, 0], du_displacement: [0, 0, 0], dv_displacement: [0, 0, 0] }] };
+    const run = (base) => page.evaluate(async ([b, id, req]) => {
+      try {
+        const { Client: C } = await import(`${b}/app/client.js`);
+        const cl = new C(b);
+        const list = await cl.geometries();
+        const put = await cl.putHold(id, 'elsewhere-hand', req);
+        const seen = await new Promise((resolve, reject) => {
+          const sub = cl.events(id, { onResult: (r) => { sub.close(); resolve(r.res_id); } });
+          setTimeout(() => { sub.close(); reject(new Error('no event')); }, 5000);
+        });
+        const released = await cl.deleteHold(id, 'elsewhere-hand');
+        return { ok: true, geometries: list.length, put: put.res_id, seen, released: released.res_id };
+      } catch (err) {
+        return { ok: false, error: String(err) };
+      }
+    }, [base, gid, body]);
+    const allowed = await run(open.url);
+    assert.ok(allowed.ok, allowed.error);
+    assert.equal(allowed.geometries, 1);
+    assert.ok(allowed.seen >= allowed.put && allowed.released > allowed.put);
+    // The suite's own server has no --cors-origin: the browser refuses to read its answers.
+    const refused = await run(server.url);
+    assert.equal(refused.ok, false);
+    assert.ok(errors.length > 0, 'the browser reports the blocked requests');
+    await page.close();
+  } finally {
+    await open.stop();
+    site.close();
+  }
+});
+
 test('screenshots: two pages pulling one object, and the stress view', { skip: process.env.SOFTSHELL_SCREENSHOTS === '0' }, async () => {
   const dir = join(repo, 'docs/images');
   mkdirSync(dir, { recursive: true });
