@@ -313,5 +313,29 @@ TEST(HttpEventsTest, MoreThan1024ConnectionsOpenAtOnce) {
   EXPECT_NE(metrics.find("softshell_http_event_streams 1100\n"), std::string::npos);
 }
 
+// The event writer sends the stream's head itself: with --cors-origin an allowed Origin gets the
+// CORS headers there too (a page elsewhere reads the stream), any other Origin none.
+TEST(HttpEventsTest, CorsHeadersOnTheStreamForAllowedOrigins) {
+  http::ServerOptions options = test_server_options();
+  options.cors_origins = {"http://app.example:3000"};
+  TestServer server(test_service_options(), options);
+  const Geo g = upload_ready(server);
+  deform(server, g, 1);
+  SseClient allowed(server.port(), g.base + "/events", {"Origin: http://app.example:3000"});
+  ASSERT_TRUE(allowed.read_head(milliseconds(10000)));
+  EXPECT_EQ(allowed.parser().status(), 200);
+  EXPECT_EQ(allowed.parser().header("Access-Control-Allow-Origin"), "http://app.example:3000");
+  EXPECT_EQ(allowed.parser().header("Vary"), "Origin");
+  EXPECT_TRUE(allowed.parser().chunked());
+  auto first = allowed.next_result(milliseconds(10000));
+  ASSERT_TRUE(first);
+  expect_event_of(server, g, *first, 1);
+
+  SseClient other(server.port(), g.base + "/events", {"Origin: http://evil.example"});
+  ASSERT_TRUE(other.read_head(milliseconds(10000)));
+  EXPECT_EQ(other.parser().status(), 200);
+  EXPECT_EQ(other.parser().header("Access-Control-Allow-Origin"), "");
+}
+
 }  // namespace
 }  // namespace softshell

@@ -6,10 +6,14 @@
 #include <memory>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <pthread.h>
 #include <sys/resource.h>
 
+// GCC 12 reports a potential null dereference inside CLI11's own string splitting
+// (CLI::detail::split, inlined here) that cannot happen; it is silenced for this file only.
+#pragma GCC diagnostic ignored "-Wnull-dereference"
 #include <CLI/CLI.hpp>
 
 #include "softshell/http/server.h"
@@ -40,6 +44,7 @@ struct Options {
   size_t cache_mb = 0, store_mb = 0, max_body_mb = 0;
   int max_connections = 0;
   int event_writers = 0;
+  std::vector<std::string> cors_origins;
   std::string log_level = "info";
 };
 
@@ -78,6 +83,10 @@ void add_options(CLI::App& app, Options& o) {
   app.add_option("--event-writers", o.event_writers,
                  "threads writing event streams, 1..64 (default: half the cores,\nat least 1)")
       ->envname("SOFTSHELL_EVENT_WRITERS")->type_name("N")->check(range(1, 64));
+  app.add_option("--cors-origin", o.cors_origins,
+                 "let pages from origin O (e.g. http://localhost:3000, or *) call\n"
+                 "the API (CORS); repeatable; off by default")
+      ->envname("SOFTSHELL_CORS_ORIGIN")->type_name("O")->allow_extra_args(false);
   app.add_option("--log-level", o.log_level,
                  "debug, info, warning, error or off (default info); info logs one\n"
                  "line per request: method, path, status, microseconds")
@@ -122,6 +131,7 @@ int main(int argc, char** argv) {
   if (o.max_body_mb > 0) http_options.max_body_bytes = o.max_body_mb << 20;
   if (o.max_connections > 0) http_options.max_connections = o.max_connections;
   if (o.event_writers > 0) http_options.event_writers = o.event_writers;
+  http_options.cors_origins = o.cors_origins;
   const service::LogLevel level = service::parse_log_level(o.log_level).value();  // checked above
 
   const service::Logger logger{level, service::stderr_log_sink()};

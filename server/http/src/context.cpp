@@ -24,6 +24,9 @@ constexpr std::array<std::string_view, kEndpointCount> kEndpointNames = {
     "GET /geometries/{id}/holds",
     "GET /geometries/{id}/holds/{hold_id}",
     "GET /geometries/{id}/events",
+    "GET /geometries/{id}/render",
+    "GET|POST /geometries/{id}/results/{res_id}/stresses",
+    "GET /, /app/{file}",
     "unmatched",
 };
 

@@ -44,6 +44,9 @@ enum class Endpoint : int {
   kHolds,
   kHold,
   kEvents,
+  kRender,
+  kStresses,
+  kApp,
   kUnmatched,
   kCount
 };
@@ -159,5 +162,6 @@ void add_geometry_routes(Router& r, Context& c);  // /geometries, /geometries/{i
 void add_result_routes(Router& r, Context& c);    // .../results..., .../latest_result, .../limit_comb
 void add_hold_routes(Router& r, Context& c);      // .../holds, .../holds/{hold_id}
 void add_event_routes(Router& r, Context& c);     // .../events
+void add_browser_routes(Router& r, Context& c);   // .../render, .../results/{res_id}/stresses, /, /app/{file}
 
 }  // namespace softshell::http::internal

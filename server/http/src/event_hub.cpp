@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <string_view>
 #include <cerrno>
 #include <cstring>
 #include <string_view>
@@ -64,17 +65,19 @@ FramePtr whole(std::string bytes) {
   return f;
 }
 
-const FramePtr& head11() {
-  static const FramePtr f = whole(
-      "HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\n"
-      "X-Accel-Buffering: no\r\nTransfer-Encoding: chunked\r\n\r\n");
-  return f;
+std::string head_text(bool http10, std::string_view extra) {
+  std::string h = http10 ? "HTTP/1.0 200 OK\r\n" : "HTTP/1.1 200 OK\r\n";
+  h += "Content-Type: text/event-stream\r\nCache-Control: no-cache\r\nX-Accel-Buffering: no\r\n";
+  h += extra;
+  h += http10 ? "Connection: close\r\n\r\n" : "Transfer-Encoding: chunked\r\n\r\n";
+  return h;
 }
-const FramePtr& head10() {
-  static const FramePtr f = whole(
-      "HTTP/1.0 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\n"
-      "X-Accel-Buffering: no\r\nConnection: close\r\n\r\n");
-  return f;
+// The response head; shared by every stream without extra header lines.
+FramePtr head(bool http10, const std::string& extra) {
+  static const FramePtr h11 = whole(head_text(false, {}));
+  static const FramePtr h10 = whole(head_text(true, {}));
+  if (extra.empty()) return http10 ? h10 : h11;
+  return whole(head_text(http10, extra));
 }
 const FramePtr& keep_alive_frame() {
   static const FramePtr f = chunk(": keep-alive\n\n", 0);
@@ -164,6 +167,7 @@ struct Arrival {
   int fd = -1;
   uint32_t have = 0;
   bool http10 = false;
+  std::string extra_head;  // header lines ("Name: value\r\n"...) for this stream's head (CORS)
 };
 
 // Per shard (no cache line shared between writers); the hub adds them up.
@@ -339,7 +343,7 @@ struct Shard {
     s->all_index = all.size();
     all.push_back(s);
     counters.streams.fetch_add(1, std::memory_order_relaxed);
-    s->current = a.http10 ? head10() : head11();
+    s->current = head(a.http10, a.extra_head);
     // The newest result: this shard's (serialized now if none of its streams needed it yet), or
     // a newer one another shard serialized already.
     FramePtr newest = mine.latest ? s->topic->frame_of(mine.latest, mine.latest_at, counters.frames_serialized) : nullptr;
@@ -563,13 +567,13 @@ struct EventHub::Impl {
     return topic;
   }
 
-  void attach(std::shared_ptr<Topic> topic, int fd, uint32_t have, bool http10) {
+  void attach(std::shared_ptr<Topic> topic, int fd, uint32_t have, bool http10, std::string extra_head) {
     const int flags = ::fcntl(fd, F_GETFL, 0);
     ::fcntl(fd, F_SETFL, flags | O_NONBLOCK);
     int yes = 1;
     ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
     Shard& shard = *shards[next_shard.fetch_add(1, std::memory_order_relaxed) % shards.size()];
-    if (shard.attach({topic, fd, have, http10})) return;
+    if (shard.attach({topic, fd, have, http10, std::move(extra_head)})) return;
     // Stopping: the stream would end at once.
     static constexpr std::string_view kBusy =
         "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nContent-Length: 61\r\n"
@@ -615,8 +619,8 @@ Result<std::unique_ptr<EventHub::Ticket>> EventHub::open(const GeomId& id) {
   return std::make_unique<Ticket>(impl_.get(), std::move(*topic));
 }
 
-void EventHub::attach(std::unique_ptr<Ticket> ticket, int fd, uint32_t have, bool http10) {
-  impl_->attach(ticket->release(), fd, have, http10);
+void EventHub::attach(std::unique_ptr<Ticket> ticket, int fd, uint32_t have, bool http10, std::string extra_head) {
+  impl_->attach(ticket->release(), fd, have, http10, std::move(extra_head));
 }
 
 void EventHub::stop() { impl_->stop(); }

@@ -75,8 +75,9 @@ class EventHub {
   Result<std::unique_ptr<Ticket>> open(const GeomId& id);
   // Hands a connected socket over: the hub writes the response head, the newest result if its
   // id is above `have`, then every newer result. `http10`: the client speaks HTTP/1.0 (no
-  // chunked body; the stream ends with the connection). Never fails; the hub owns `fd`.
-  void attach(std::unique_ptr<Ticket> ticket, int fd, uint32_t have, bool http10);
+  // chunked body; the stream ends with the connection). `extra_head`: header lines ("Name:
+  // value\r\n"...) for the response head, e.g. CORS. Never fails; the hub owns `fd`.
+  void attach(std::unique_ptr<Ticket> ticket, int fd, uint32_t have, bool http10, std::string extra_head = {});
 
   // Ends every stream (see the file comment) and joins the writer. Idempotent.
   void stop();

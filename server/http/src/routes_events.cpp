@@ -1,6 +1,7 @@
 // GET /geometries/{id}/events: Server-Sent Events (PROTOCOL.md v2). The checks are answered here;
 // the stream itself is handed to the event writer (event_hub.h), which owns the socket from then on.
 #include "context.h"
+#include "extensions.h"
 
 namespace softshell::http::internal {
 
@@ -21,7 +22,9 @@ void events(Context& c, const httplib::Request& req, httplib::Response& res) {
   if (!connection) throw Exception(ErrorCode::kInternal, "an event stream outside a connection");
   auto ticket = value_or_throw(c.events->open(id));
   const int fd = connection->take();
-  c.events->attach(std::move(ticket), fd, have, req.version == "HTTP/1.0");
+  // The writer sends the head itself, so the CORS headers (--cors-origin) go with it.
+  std::string extra = cors_header_lines(c.options.cors_origins, req.get_header_value("Origin"));
+  c.events->attach(std::move(ticket), fd, have, req.version == "HTTP/1.0", std::move(extra));
   res.status = 200;  // for the log; the writer sends the head
 }
 

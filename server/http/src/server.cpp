@@ -13,6 +13,7 @@
 
 #include "connection_threads.h"
 #include "context.h"
+#include "extensions.h"
 #include "softshell/service/metrics.h"
 
 namespace softshell::http {
@@ -109,6 +110,8 @@ struct HttpServer::Impl {
     internal::add_result_routes(router, ctx);
     internal::add_hold_routes(router, ctx);
     internal::add_event_routes(router, ctx);
+    internal::add_browser_routes(router, ctx);
+    internal::install_cors(server, ctx.options.cors_origins);
   }
 
   // Errors cpp-httplib produces itself (no route, body too large, malformed request) get the

@@ -562,6 +562,12 @@ Result<LimitComb> Service::limit_comb(const GeomId& id, const SurfacePoint& poin
   });
 }
 
+Result<LimitEvaluator> Service::limit_evaluator(const GeomId& id) const {
+  auto e = impl_->find(id);
+  if (!e) return not_found(id);
+  return impl_->evaluator(*e);
+}
+
 ServiceStats Service::stats() const {
   ServiceStats s;
   for (const auto& e : impl_->all()) {

@@ -20,6 +20,7 @@
 #include <cstddef>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "softshell/result.h"
 #include "softshell/service/log.h"
@@ -61,6 +62,10 @@ struct ServerOptions {
   /// Threads that write event streams (each serves a share of the streams over epoll); 0 = half
   /// the hardware threads, at least 1 (the other half is left to solves and requests).
   int event_writers = 0;
+  /// Origins allowed to call the API from pages served elsewhere (CORS; "*" = any origin):
+  /// preflight requests are answered and responses carry Access-Control-Allow-Origin. Empty
+  /// (the default): no CORS headers, browsers allow only same-origin pages (the app at /).
+  std::vector<std::string> cors_origins;
   /// Where request lines (`info`: method, path, status, microseconds) and handler failures
   /// (`error`) go.
   service::Logger logger;

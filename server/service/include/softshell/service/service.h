@@ -224,6 +224,9 @@ class Service {
   /// The limit point and tangents at `point` as combinations of control points (available
   /// while the geometry is still precomputing). kInvalidArgument for a bad point.
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) const;
+  /// The geometry's limit evaluator (the surface the simulation uses; available while it
+  /// precomputes), for extensions that evaluate the surface (render tables). kNotFound if unknown.
+  Result<LimitEvaluator> limit_evaluator(const GeomId& id) const;
 
   /// Stresses of a stored result (softshell/stresses.h), computed on the calling thread:
   /// kNotFound for an unknown geometry or result, kInvalidArgument for a bad query (level outside
