@@ -19,7 +19,7 @@ PACKAGES=(
   g++ cmake ninja-build pkg-config git ca-certificates
   libeigen3-dev libosd-dev libsuitesparse-dev libbullet-dev
   libcpp-httplib-dev nlohmann-json3-dev libssl-dev libstb-dev
-  libgtest-dev libgmock-dev libopenblas0-pthread libcli11-dev
+  libgtest-dev libgmock-dev libopenblas0-pthread libcli11-dev curl
 )
 
 install_deps() {

@@ -1,5 +1,8 @@
 // JSON layouts of PROTOCOL.md (and the documented extensions).
 //
+// (Long, on purpose: every JSON body's reader and writer side by side, sharing one set of strict
+// field readers, so a layout's rules and its error messages live in one place.)
+//
 // Request bodies (uploads, deformation requests) are strict: unknown fields are an error, so a
 // typo never silently changes a simulation. Response bodies are lenient: unknown fields are
 // ignored, so clients keep working against newer servers.

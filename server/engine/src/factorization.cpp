@@ -291,6 +291,7 @@ bool Factorization::sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& 
     const Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> block(values + px[s], nrows, ncols,
                                                                             Eigen::OuterStride<>(nrows));
     auto xs = x.middleRows(k1, ncols);
+    if (xs.size() == 0) continue;  // no right-hand sides (an empty triangular solve is UB in Eigen)
     block.topRows(ncols).triangularView<Eigen::Lower>().solveInPlace(xs);
     if (nrows == ncols) continue;
     update.noalias() = block.bottomRows(nrows - ncols) * xs;
