@@ -583,6 +583,36 @@ TEST(HoldsTest, HoldsCountAgainstTheMemoryBudget) {
   (void)pid;
 }
 
+// The number of live holds per geometry is bounded (each solve combines all of them): one more
+// new hold is a conflict that says so, while the holds there keep changing and a release makes room.
+TEST(HoldsTest, LiveHoldsPerGeometryAreBounded) {
+  ServiceOptions o = small_options();
+  o.max_holds_per_geometry = 3;
+  Service s(o);
+  const GeomId id = upload_ready(s);
+  ASSERT_TRUE(put(s, id, "pins", pins()));
+  ASSERT_TRUE(put(s, id, "push-a", push(-0.25)));
+  ASSERT_TRUE(put(s, id, "push-b", push(-0.5)));
+  auto refused = s.put_hold(id, "push-c", push(-0.75));
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().code, ErrorCode::kConflict);
+  EXPECT_NE(refused.error().message.find("already has 3 live holds"), std::string::npos) << refused.error().message;
+  EXPECT_NE(refused.error().message.find("'push-c' was not created"), std::string::npos) << refused.error().message;
+  EXPECT_FALSE(s.hold(id, "push-c"));
+  EXPECT_EQ(s.holds(id).value().holds.size(), 3u);
+  // An existing hold still changes.
+  const ResultPtr changed = put(s, id, "push-b", push(-1.0));
+  ASSERT_TRUE(changed);
+  EXPECT_EQ(version_in(*changed, "push-b"), 2u);
+  // A release makes room for a new one.
+  auto released = s.release_hold(id, "push-a");
+  ASSERT_TRUE(released);
+  ASSERT_TRUE(outcome(*released));
+  const ResultPtr added = put(s, id, "push-c", push(-0.75));
+  ASSERT_TRUE(added);
+  EXPECT_EQ(*added->holds, (HoldVersions{{"pins", 1}, {"push-b", 2}, {"push-c", 1}}));
+}
+
 TEST(HoldsTest, ShutdownAnswersChangesThatWait) {
   auto s = std::make_unique<Service>(small_options());
   auto up = s->upload(test::make_grid(48, 48), exact_material());

@@ -385,6 +385,14 @@ Result<HoldTicket> Service::put_hold(const GeomId& id, const std::string& hold_i
         }
         return ticket;
       }
+      if (it == t.live.end() && t.live.size() >= impl_->options.max_holds_per_geometry) {
+        impl_->hold_conflicts.fetch_add(1);
+        return Error{ErrorCode::kConflict,
+                     "geometry " + id.hex() + " already has " + std::to_string(t.live.size()) +
+                         " live holds, the most one geometry takes; hold '" + hold_id +
+                         "' was not created: release a hold (DELETE) or let its lease lapse, or update an "
+                         "existing hold instead of creating a new one"};
+      }
       if (it == t.live.end()) {
         LiveHold h;
         h.instance = t.next_instance++;

@@ -65,6 +65,10 @@ struct ServiceOptions {
   /// What one follower of a geometry's results (an event stream) counts against `store_bytes`
   /// (see `Service::subscribe`): its share of the memory the server keeps for it.
   size_t follower_bytes = 4096;
+  /// Live holds one geometry takes at once (every hold-state solve combines all of them, so the
+  /// count bounds its cost). A PUT that would create one more is refused with kConflict (HTTP
+  /// 409) naming the limit; changes of existing holds are always taken.
+  size_t max_holds_per_geometry = 256;
   /// Where the service's messages go (precomputations started/finished/failed).
   Logger logger;
 };
