@@ -415,13 +415,53 @@ TEST(HoldsTest, ChangesMadeDuringOneSolveAreMergedIntoTheNext) {
   EXPECT_EQ(outcome(tickets.back()).error().code, ErrorCode::kConflict);
   const auto stats = s.stats();
   EXPECT_EQ(stats.hold_solves, 1u);
-  EXPECT_EQ(stats.hold_changes_solved, tickets.size());
+  // hand-0's first version was still queued when its second came: replaced, not solved.
+  EXPECT_EQ(stats.hold_changes_superseded, 1u);
+  EXPECT_EQ(stats.hold_changes_solved, tickets.size() - 1);
   EXPECT_EQ(s.result_ids(up->id)->size(), 1u);
   auto r = s.result(up->id, 1);
   ASSERT_TRUE(r);
   EXPECT_EQ(version_in(**r, "hand-0"), 2u);
   EXPECT_EQ(version_in(**r, "bad"), 0u);
   EXPECT_EQ((*r)->holds->size(), 7u);
+}
+
+// A client that PUTs faster than the solves (here: while the geometry precomputes) never grows
+// the queue: each PUT replaces its hold's queued change, every PUT is answered by the one result,
+// which includes the newest version, and the versions superseded take no memory.
+TEST(HoldsTest, QueuedChangesOfOneHoldAreReplacedNotQueued) {
+  Service s(small_options());
+  const ControlMesh mesh = test::make_grid(48, 48);
+  auto up = s.upload(mesh, exact_material());
+  ASSERT_TRUE(up);
+  std::vector<HoldTicket> tickets;
+  auto add = [&](const std::string& hold, DeformationRequest r) {
+    auto t = s.put_hold(up->id, hold, std::move(r));
+    ASSERT_TRUE(t) << t.error().message;
+    tickets.push_back(*t);
+  };
+  add("pins", pins(48));
+  constexpr int kPuts = 200;
+  for (int k = 1; k <= kPuts; ++k) add("hand", lift(grid_index(48, 24, 24), 1e-4 * k));
+  ASSERT_EQ(s.info(up->id)->status, GeometryStatus::kPrecomputing)  // (else the test proves nothing)
+      << "the precomputation finished before the changes were made";
+  EXPECT_EQ(s.stats().hold_changes_pending, 2u);  // one per hold, not 201
+  for (const auto& t : tickets) {
+    auto o = outcome(t);
+    ASSERT_TRUE(o) << t.hold_id << " v" << t.version << ": " << o.error().message;
+    ASSERT_TRUE(o->result);
+    EXPECT_EQ(o->result->res_id, 1u);
+    EXPECT_EQ(version_in(*o->result, "hand"), static_cast<uint64_t>(kPuts));
+  }
+  const auto stats = s.stats();
+  EXPECT_EQ(stats.hold_changes_superseded, static_cast<uint64_t>(kPuts - 1));
+  EXPECT_EQ(stats.hold_changes_solved, 2u);
+  EXPECT_EQ(stats.hold_solves, 1u);
+  // The newest version is the one in force.
+  auto r = s.result(up->id, 1);
+  ASSERT_TRUE(r);
+  EXPECT_NEAR((**r).positions[static_cast<size_t>(grid_index(48, 24, 24))].z() - mesh.positions()[static_cast<size_t>(grid_index(48, 24, 24))].z(),
+              1e-4 * kPuts, 1e-12);
 }
 
 TEST(HoldsTest, ConcurrentClientsEachGetTheirVersionAndTheNewestHasAll) {

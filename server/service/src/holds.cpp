@@ -5,7 +5,9 @@
 // answered through a promise. At most one solve task per geometry is queued or running; it takes
 // every queued change at once ("a batch"), solves the state with all of them, and if that fails
 // goes through them one by one in arrival order to find the ones to refuse. Releases always go
-// through; a release that leaves the rest unsolvable makes the state "unsolvable".
+// through; a release that leaves the rest unsolvable makes the state "unsolvable". A PUT whose
+// hold already has a change queued (not yet taken by a solve) replaces it, so the queue holds at
+// most one change per hold besides releases.
 #include <algorithm>
 
 #include "service_impl.h"
@@ -403,11 +405,30 @@ Result<HoldTicket> Service::put_hold(const GeomId& id, const std::string& hold_i
         it = t.live.emplace(hold_id, std::move(h)).first;
       }
       LiveHold& h = it->second;
+      // A change of this hold that no solve has taken yet is superseded by this one: it leaves the
+      // queue and its waiters wait for this change (whose result includes a newer version). So the
+      // queue holds at most one change per hold (plus releases), however fast a client PUTs while
+      // a solve or the precomputation runs.
+      std::vector<HoldPromise> superseded;
+      if (h.newest_seq) {
+        const auto old = std::find_if(t.pending.begin(), t.pending.end(),
+                                      [&](const HoldChange& c) { return c.seq == h.newest_seq; });
+        if (old != t.pending.end()) {
+          t.pending.erase(old);
+          if (auto w = t.waiters.find(h.newest_seq); w != t.waiters.end()) {
+            superseded = std::move(w->second);
+            t.waiters.erase(w);
+          }
+          impl_->hold_changes_superseded.fetch_add(1);
+        }
+      }
       version->version = h.next_version++;
       h.newest = version;
       h.newest_seq = t.next_seq++;
       t.pending.push_back(HoldChange{h.newest_seq, hold_id, h.instance, version});
-      t.waiters[h.newest_seq].push_back(promise);
+      auto& waiting = t.waiters[h.newest_seq];
+      waiting = std::move(superseded);
+      waiting.push_back(promise);
       impl_->schedule_lease_locked(e, hold_id, h, options.ttl);
       ticket.version = version->version;
       launch = impl_->claim_hold_solve_locked(*e);

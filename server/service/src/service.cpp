@@ -599,6 +599,7 @@ ServiceStats Service::stats() const {
   s.precompute_seconds = impl_->precompute_hist.snapshot();
   s.hold_solves = impl_->hold_solves.load();
   s.hold_changes_solved = impl_->hold_changes_solved.load();
+  s.hold_changes_superseded = impl_->hold_changes_superseded.load();
   s.hold_renewals = impl_->hold_renewals.load();
   s.hold_conflicts = impl_->hold_conflicts.load();
   s.hold_rejections = impl_->hold_rejections.load();

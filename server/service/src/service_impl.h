@@ -194,7 +194,7 @@ struct Service::Impl {
   // Holds
   std::atomic<uint64_t> next_lease{1};
   std::atomic<uint64_t> hold_solves{0}, hold_changes_solved{0}, hold_renewals{0}, hold_conflicts{0},
-      hold_rejections{0}, leases_expired{0};
+      hold_rejections{0}, leases_expired{0}, hold_changes_superseded{0};
   std::atomic<size_t> followers{0};
   Histogram hold_solve_hist;
 

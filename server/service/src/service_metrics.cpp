@@ -53,6 +53,8 @@ std::string Service::metrics_text() const {
   counter("softshell_hold_solves_total", "Hold-state solves (each takes every change queued meanwhile).",
           d(s.hold_solves));
   counter("softshell_hold_changes_solved_total", "Hold changes taken by hold-state solves.", d(s.hold_changes_solved));
+  counter("softshell_hold_changes_superseded_total",
+          "Hold changes replaced by a newer PUT of their hold before a solve took them.", d(s.hold_changes_superseded));
   counter("softshell_hold_renewals_total", "PUTs of an unchanged hold (lease renewed only).", d(s.hold_renewals));
   m.family("softshell_hold_refusals_total", "counter", "Hold changes refused, by status.");
   m.sample("softshell_hold_refusals_total", PrometheusText::label("status", "409"), d(s.hold_conflicts));

@@ -112,6 +112,7 @@ struct ServiceStats {
   size_t hold_states_unsolvable = 0;    ///< geometries whose remaining holds cannot be solved
   uint64_t hold_solves = 0;             ///< hold-state solves (a batch of merged changes each)
   uint64_t hold_changes_solved = 0;     ///< changes those solves took (/ hold_solves = merged per solve)
+  uint64_t hold_changes_superseded = 0; ///< changes replaced by a newer PUT of their hold before a solve took them
   uint64_t hold_renewals = 0;           ///< PUTs that only renewed a lease
   uint64_t hold_conflicts = 0;          ///< changes refused with kConflict (409)
   uint64_t hold_rejections = 0;         ///< changes refused with kUnprocessable (422)
