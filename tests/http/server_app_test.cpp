@@ -159,7 +159,7 @@ TEST(ServerAppTest, OptionFormsVersionAndEnvironment) {
   EXPECT_EQ(help.wait(std::chrono::seconds(10)), 0);
   for (const char* env : {"SOFTSHELL_HOST", "SOFTSHELL_PORT", "SOFTSHELL_THREADS", "SOFTSHELL_SOLVE_THREADS",
                           "SOFTSHELL_PRECOMPUTE_JOBS", "SOFTSHELL_CACHE_MB", "SOFTSHELL_STORE_MB", "SOFTSHELL_MAX_BODY_MB",
-                          "SOFTSHELL_MAX_CONNECTIONS", "SOFTSHELL_LOG_LEVEL"}) {
+                          "SOFTSHELL_MAX_CONNECTIONS", "SOFTSHELL_EVENT_WRITERS", "SOFTSHELL_LOG_LEVEL"}) {
     EXPECT_NE(text.find(env), std::string::npos) << env;
   }
 

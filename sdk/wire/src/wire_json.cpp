@@ -350,7 +350,7 @@ Error decode_error_json(std::string_view body, int http_status) {
         if (const json* m = find(j, "message"); m && m->is_string()) error.message = m->get<std::string>();
         if (const json* c = find(j, "error"); c && c->is_string()) {
           const std::string code = c->get<std::string>();
-          for (int k = 0; k <= static_cast<int>(ErrorCode::kInternal); ++k) {
+          for (int k = 0; k <= static_cast<int>(ErrorCode::kConflict); ++k) {
             if (to_string(static_cast<ErrorCode>(k)) == code) error.code = static_cast<ErrorCode>(k);
           }
         }
@@ -734,6 +734,118 @@ Result<LimitComb> decode_limit_comb_json(std::string_view body) {
       for (size_t i = 0; i < w.size(); ++i) out->push_back(number(w[i], item(key, i)));
     }
     return c;
+  });
+}
+
+// ---------------------------------------------------------------------------------------------
+// Holds (PROTOCOL.md version 2)
+
+std::string encode_result_json(const DeformationResult& result, const HoldVersions& holds) {
+  JsonOut out;
+  out.raw("{\"res_id\":").integer(result.res_id).raw(",\"positions\":");
+  out.array(result.positions, [&](const Vec3& p) { out.vec3(p); }).raw(",\"holds\":{");
+  for (size_t i = 0; i < holds.size(); ++i) {
+    if (i) out.raw(",");
+    out.key(holds[i].first).integer(static_cast<int64_t>(holds[i].second));
+  }
+  out.raw("}}");
+  return out.take();
+}
+
+Result<HeldResult> decode_held_result_json(std::string_view body, std::optional<int32_t> expected_vertices) {
+  auto result = decode_result_json(body, expected_vertices);
+  if (!result) return result.error();
+  return decoding([&]() -> HeldResult {
+    HeldResult r{std::move(*result), std::nullopt};
+    const json root = parse(body);
+    if (const json* h = find(root, "holds")) {
+      object(*h, "holds");
+      HoldVersions versions;
+      for (auto it = h->begin(); it != h->end(); ++it) {
+        versions.emplace_back(it.key(), static_cast<uint64_t>(integer(it.value(), join("holds", it.key()), 0,
+                                                                      std::numeric_limits<int64_t>::max())));
+      }
+      r.holds = std::move(versions);
+    }
+    return r;
+  });
+}
+
+std::string encode_hold_accepted_json(std::string_view hold_id, uint64_t version) {
+  JsonOut out;
+  out.raw("{").key("hold_id").string(hold_id).raw(",").key("version").integer(static_cast<int64_t>(version)).raw("}");
+  return out.take();
+}
+
+namespace {
+
+HoldInfo hold_info(const json& j, const std::string& path, bool with_expiry) {
+  object(j, path);
+  HoldInfo h;
+  h.hold_id = text(require(j, "hold_id", path), join(path, "hold_id"));
+  h.version = static_cast<uint64_t>(
+      integer(require(j, "version", path), join(path, "version"), 0, std::numeric_limits<int64_t>::max()));
+  if (with_expiry) h.expires_in = number(require(j, "expires_in", path), join(path, "expires_in"));
+  return h;
+}
+
+void write_hold_info(JsonOut& out, const HoldInfo& h) {
+  out.key("hold_id").string(h.hold_id).raw(",").key("version").integer(static_cast<int64_t>(h.version));
+  out.raw(",").key("expires_in").number(h.expires_in);
+}
+
+}  // namespace
+
+Result<HoldInfo> decode_hold_accepted_json(std::string_view body) {
+  return decoding([&]() -> HoldInfo { return hold_info(parse(body), "", false); });
+}
+
+std::string encode_hold_list_json(const HoldList& list) {
+  JsonOut out;
+  out.raw("{\"holds\":").array(list.holds, [&](const HoldInfo& h) {
+    out.raw("{");
+    write_hold_info(out, h);
+    out.raw("}");
+  });
+  out.raw(",\"res_id\":").integer(list.res_id).raw(",\"state\":").string(to_string(list.state));
+  out.raw(",\"message\":").string(list.message).raw("}");
+  return out.take();
+}
+
+Result<HoldList> decode_hold_list_json(std::string_view body) {
+  return decoding([&]() -> HoldList {
+    const json root = parse(body);
+    object(root, "");
+    HoldList list;
+    const json& holds = array(require(root, "holds", ""), "holds");
+    for (size_t i = 0; i < holds.size(); ++i) list.holds.push_back(hold_info(holds[i], item("holds", i), true));
+    list.res_id = static_cast<uint32_t>(
+        integer(require(root, "res_id", ""), "res_id", 0, std::numeric_limits<uint32_t>::max()));
+    auto state = parse_hold_state(text(require(root, "state", ""), "state"));
+    if (!state) throw Exception(state.error());
+    list.state = *state;
+    if (const json* m = find(root, "message")) list.message = text(*m, "message");
+    return list;
+  });
+}
+
+std::string encode_hold_json(const HoldDetail& hold) {
+  JsonOut out;
+  out.raw("{");
+  write_hold_info(out, hold.info);
+  out.raw(",\"request\":").raw(encode_request_json(hold.request)).raw("}");
+  return out.take();
+}
+
+Result<HoldDetail> decode_hold_json(std::string_view body) {
+  return decoding([&]() -> HoldDetail {
+    const json root = parse(body);
+    HoldDetail d;
+    d.info = hold_info(root, "", true);
+    auto request = decode_request_json(object(require(root, "request", ""), "request").dump());
+    if (!request) throw Exception(request.error().code, "'request': " + request.error().message);
+    d.request = std::move(*request);
+    return d;
   });
 }
 

@@ -6,9 +6,14 @@
 #include <memory>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <pthread.h>
+#include <sys/resource.h>
 
+// GCC 12 reports a potential null dereference inside CLI11's own string splitting
+// (CLI::detail::split, inlined here) that cannot happen; it is silenced for this file only.
+#pragma GCC diagnostic ignored "-Wnull-dereference"
 #include <CLI/CLI.hpp>
 
 #include "softshell/http/server.h"
@@ -26,7 +31,8 @@ constexpr const char* kDescription =
 
 constexpr const char* kFooter =
     "The server prints \"softshell-server listening on http://HOST:PORT\" once it accepts requests and\n"
-    "stops cleanly on SIGINT or SIGTERM (waiting long polls are answered, running solves finish).\n";
+    "stops cleanly on SIGINT or SIGTERM (waiting long polls and hold changes are answered, event\n"
+    "streams end after the event they are sending, running solves finish).\n";
 
 // What the command line sets (the defaults are the service's own where none is written here).
 struct Options {
@@ -37,6 +43,8 @@ struct Options {
   int precompute_jobs = 1;
   size_t cache_mb = 0, store_mb = 0, max_body_mb = 0;
   int max_connections = 0;
+  int event_writers = 0;
+  std::vector<std::string> cors_origins;
   std::string log_level = "info";
 };
 
@@ -59,15 +67,26 @@ void add_options(CLI::App& app, Options& o) {
                  "least recently used factors are evicted to stay under it")
       ->envname("SOFTSHELL_CACHE_MB")->type_name("MIB")->check(range(1, 1LL << 24));
   app.add_option("--store-mb", o.store_mb,
-                 "memory budget in MiB for meshes, precomputed models and results\n"
-                 "(default: half the physical memory); uploads and results that do\n"
-                 "not fit are refused with 507, nothing stored is ever dropped")
+                 "memory budget in MiB for meshes, precomputed models, results,\n"
+                 "holds and event-stream followers (default: half the physical\n"
+                 "memory); what does not fit is refused with 507, nothing stored is\n"
+                 "ever dropped")
       ->envname("SOFTSHELL_STORE_MB")->type_name("MIB")->check(range(1, 1LL << 26));
   app.add_option("--max-body-mb", o.max_body_mb, "largest request body in MiB, 1..4096 (default 64); larger\nbodies get 413")
       ->envname("SOFTSHELL_MAX_BODY_MB")->type_name("MIB")->check(range(1, 4096));
   app.add_option("--max-connections", o.max_connections,
-                 "open connections served at once, one thread each, 8..32768\n(default 1024)")
+                 "open connections served at once, one thread each, 8..32768\n"
+                 "(default 1024); event streams (GET .../events) do not count: they\n"
+                 "are served by the event writers and limited by the descriptor\n"
+                 "limit and --store-mb")
       ->envname("SOFTSHELL_MAX_CONNECTIONS")->type_name("N")->check(range(8, 32768));
+  app.add_option("--event-writers", o.event_writers,
+                 "threads writing event streams, 1..64 (default: half the cores,\nat least 1)")
+      ->envname("SOFTSHELL_EVENT_WRITERS")->type_name("N")->check(range(1, 64));
+  app.add_option("--cors-origin", o.cors_origins,
+                 "let pages from origin O (e.g. http://localhost:3000, or *) call\n"
+                 "the API (CORS); repeatable; off by default")
+      ->envname("SOFTSHELL_CORS_ORIGIN")->type_name("O")->allow_extra_args(false);
   app.add_option("--log-level", o.log_level,
                  "debug, info, warning, error or off (default info); info logs one\n"
                  "line per request: method, path, status, microseconds")
@@ -111,6 +130,8 @@ int main(int argc, char** argv) {
   if (o.store_mb > 0) service_options.store_bytes = o.store_mb << 20;
   if (o.max_body_mb > 0) http_options.max_body_bytes = o.max_body_mb << 20;
   if (o.max_connections > 0) http_options.max_connections = o.max_connections;
+  if (o.event_writers > 0) http_options.event_writers = o.event_writers;
+  http_options.cors_origins = o.cors_origins;
   const service::LogLevel level = service::parse_log_level(o.log_level).value();  // checked above
 
   const service::Logger logger{level, service::stderr_log_sink()};
@@ -118,6 +139,14 @@ int main(int argc, char** argv) {
   service_options.logger = logger;
   http_options.logger = logger;
   http_options.reserved_connections = std::min(http_options.reserved_connections, http_options.max_connections / 2);
+
+  // Every open connection and event stream is a descriptor: the soft limit (often 1024) is
+  // raised to the hard one.
+  rlimit files{};
+  if (::getrlimit(RLIMIT_NOFILE, &files) == 0 && files.rlim_cur < files.rlim_max) {
+    files.rlim_cur = files.rlim_max;
+    ::setrlimit(RLIMIT_NOFILE, &files);
+  }
 
   // SIGINT and SIGTERM are taken by sigwait below; every thread created from here on inherits
   // the blocked mask, so no worker is interrupted by them.

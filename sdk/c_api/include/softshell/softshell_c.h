@@ -5,7 +5,7 @@
  *  - Objects are opaque handles made by a `ss_<noun>_create...` function and released by the
  *    matching `ss_<noun>_destroy`, which accepts NULL. A handle owns what it needs: e.g. a picker
  *    keeps its tessellation alive, so handles may be destroyed in any order.
- *  - Every other function returns an `ss_status` (int32): SS_OK (0) or an error code. Codes 1..11
+ *  - Every other function returns an `ss_status` (int32): SS_OK (0) or an error code. Codes 1..12
  *    are softshell's `ErrorCode` values (result.h); 100 and 101 exist only here. After a failure
  *    `ss_last_error_message()` says what was wrong, for a person; it is thread-local.
  *  - No exception, C++ type or allocation ownership crosses the boundary. Strings are UTF-8,
@@ -92,6 +92,7 @@ typedef int32_t ss_status;
 #define SS_CANCELLED 9
 #define SS_IO_ERROR 10             /* a file could not be read or written */
 #define SS_INTERNAL 11             /* a bug in softshell; please report it */
+#define SS_CONFLICT 12             /* contradicts other clients' holds (HTTP 409) */
 #define SS_BUFFER_TOO_SMALL 100    /* C ABI only: `capacity` is below `*out_count` */
 #define SS_NOT_READY 101           /* C ABI only: an asynchronous operation has not finished */
 
