@@ -1,4 +1,5 @@
 // softshell::service without HTTP: ids, precomputation, history, long polls, memory, shutdown.
+// (About 680 lines: one case per behaviour of the service, sharing the meshes and requests above.)
 #include "softshell/service/service.h"
 
 #include <Eigen/Geometry>

@@ -1,5 +1,6 @@
 // softshell client: the HTTP API of PROTOCOL.md (v1 and v2: holds, events) and the render-table
-// extension, for browsers and Node 18+ (ES module, no dependencies).
+// extension, for browsers and Node 18+ (ES module, no dependencies). (One file of ~660 lines on
+// purpose: a page imports one module with no build step.)
 //
 //   import { Client, LimitSurface } from './client.js';
 //   const c = new Client('http://127.0.0.1:8080');

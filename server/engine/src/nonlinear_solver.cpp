@@ -3,6 +3,8 @@
 // the cached linear factor K at rest, later a tangent factored at a deformed state, refreshed
 // when the Krylov iterations stop converging fast. Load steps, chosen by the solver, when one
 // step is too large; a secant predictor between load steps and between the steps of a drag.
+// (About 670 lines: Newton, the preconditioner refresh, the load stepping and the answer's check
+// share one Run state; split, they would pass it around.)
 //
 // Why not quasi-Newton or chord steps on an older factor: in a thin shell such steps drift off
 // the Newton path (a rotation linearized on the wrong tangent stretches the surface) and then

@@ -61,6 +61,17 @@ wire::Format reply_format(const httplib::Request& req, wire::Format fallback) {
   return response_format(req.get_header_value("Accept"), fallback);
 }
 
+void apply_model_param(const httplib::Request& req, DeformationRequest& request) {
+  if (!req.has_param("model")) return;
+  const std::string name = req.get_param_value("model");
+  const DeformationModel model = value_or_throw(wire::parse_deformation_model(name));
+  if (model != request.model && request.model != DeformationModel::kLinear) {
+    throw Exception(ErrorCode::kInvalidArgument,
+                    "the query says model=" + name + " but the body's \"model\" field says otherwise: give one");
+  }
+  request.model = model;
+}
+
 double wait_seconds(const httplib::Request& req, const ServerOptions& options) {
   double wait = options.default_wait_seconds;
   if (req.has_param("wait")) {

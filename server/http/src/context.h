@@ -15,6 +15,7 @@
 #include <utility>
 #include <vector>
 
+#include "server_header.h"
 #include "event_hub.h"
 #include "json_gate.h"
 #include "softshell/http/negotiation.h"
@@ -91,6 +92,10 @@ wire::Format body_format_of(const httplib::Request& req);
 wire::Format reply_format(const httplib::Request& req, wire::Format fallback);
 // A `wait` query parameter in seconds: default and upper bound from the options; 400 below 0.
 double wait_seconds(const httplib::Request& req, const ServerOptions& options);
+/// Applies the query parameter `model=linear|nonlinear` (PROTOCOL.md, the nonlinear model: it
+/// works with both body layouts) to a decoded request; a parameter that contradicts the body's
+/// "model" field, or an unknown model, is a 400.
+void apply_model_param(const httplib::Request& req, DeformationRequest& request);
 
 // Decodes a body in `format`, bounding the JSON bodies decoded at once (507 beyond).
 template <class T>

@@ -18,6 +18,7 @@
 #include <string_view>
 #include <thread>
 
+#include "server_header.h"
 #include "softshell/wire.h"
 
 namespace softshell::http::internal {
@@ -68,6 +69,7 @@ FramePtr whole(std::string bytes) {
 std::string head_text(bool http10, std::string_view extra) {
   std::string h = http10 ? "HTTP/1.0 200 OK\r\n" : "HTTP/1.1 200 OK\r\n";
   h += "Content-Type: text/event-stream\r\nCache-Control: no-cache\r\nX-Accel-Buffering: no\r\n";
+  h += std::string("Server: ") + kServerHeader + "\r\n";
   h += extra;
   h += http10 ? "Connection: close\r\n\r\n" : "Transfer-Encoding: chunked\r\n\r\n";
   return h;

@@ -13,19 +13,6 @@ std::string hold_id_of(const httplib::Request& req) {
   return id;
 }
 
-// The nonlinear model (issue 16) is not part of this server yet: a hold that asks for it gets a
-// clear refusal instead of a linear answer.
-void check_model(const httplib::Request& req) {
-  if (!req.has_param("model")) return;
-  const std::string model = req.get_param_value("model");
-  if (model == "linear") return;
-  if (model == "nonlinear") {
-    throw Exception(ErrorCode::kUnprocessable,
-                    "this server solves the linear model only; model=nonlinear is not available yet");
-  }
-  throw Exception(ErrorCode::kInvalidArgument, "'model' is \"linear\" or \"nonlinear\", got '" + model.substr(0, 40) + "'");
-}
-
 std::chrono::milliseconds ttl_of(const httplib::Request& req) {
   if (!req.has_param("ttl")) return std::chrono::milliseconds(10000);
   const double ttl = value_or_throw(parse_number(req.get_param_value("ttl"), "ttl"));
@@ -57,12 +44,12 @@ void put_hold(Context& c, const httplib::Request& req, httplib::Response& res) {
   const GeomId id = parse_id(req.matches[1].str());
   const std::string hold_id = hold_id_of(req);
   value_or_throw(c.service->info(id));  // 404 before the body
-  check_model(req);
   const auto ttl = ttl_of(req);
   const double wait = wait_seconds(req, c.options);
   const wire::Format format = body_format_of(req);
   DeformationRequest request =
       decode<DeformationRequest>(c, req, format, &wire::decode_request_binary, &wire::decode_request_json);
+  apply_model_param(req, request);  // (the service refuses nonlinear holds for now)
   const service::HoldTicket ticket = value_or_throw(c.service->put_hold(id, hold_id, std::move(request), {ttl}));
   answer(c, req, res, ticket, wait, format);
 }

@@ -14,6 +14,7 @@ void deform(Context& c, const httplib::Request& req, httplib::Response& res) {
   const wire::Format format = body_format_of(req);
   DeformationRequest request =
       decode<DeformationRequest>(c, req, format, &wire::decode_request_binary, &wire::decode_request_json);
+  apply_model_param(req, request);
   const auto future = c.service->deform(id, std::move(request)).share();
   // The solve runs on a service worker; this connection thread only waits for it.
   try {

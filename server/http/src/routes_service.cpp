@@ -11,7 +11,8 @@ void add_service_routes(Router& r, Context& c) {
       set_error(res, Error{ErrorCode::kUnavailable, "the server is shutting down"});
       return;
     }
-    res.set_content(R"({"status":"ok"})", std::string(wire::kJsonMediaType));
+    res.set_content(std::string(R"({"status":"ok","version":")") + SOFTSHELL_VERSION_STRING + "\"}",
+                    std::string(wire::kJsonMediaType));
   });
   r.get(R"(/metrics)", Endpoint::kMetrics, [&c](Req, Res res) {
     res.set_content(c.metrics(), "text/plain; version=0.0.4; charset=utf-8");

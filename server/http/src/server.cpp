@@ -84,6 +84,7 @@ struct HttpServer::Impl {
     server.set_pre_routing_handler(
         httplib::Server::HandlerWithResponse([](const httplib::Request& req, httplib::Response& res) {
           t_request = RequestContext{Clock::now(), Endpoint::kUnmatched, true};
+          res.set_header("Server", internal::kServerHeader);  // kept by every handler and error page
           // cpp-httplib inflates compressed request bodies without bounding the inflated size
           // (--max-body-mb limits only the compressed bytes): a small gzip bomb could take all
           // memory. Compressed bodies are refused before they are read; the connection is closed
