@@ -6,18 +6,10 @@
 #   run_shell_block.sh SERVER BLOCK
 set -euo pipefail
 server=$1 block=$2
-log=$(mktemp) out=$(mktemp)
-trap 'kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; rm -f "$log" "$out"' EXIT
-"$server" --host 127.0.0.1 --port 0 --log-level warning >"$log" 2>&1 &
-pid=$!
-url=""
-for _ in $(seq 1 200); do
-  url=$(grep -o 'http://127.0.0.1:[0-9]*' "$log" | head -n1 || true)
-  [ -n "$url" ] && break
-  kill -0 "$pid" 2>/dev/null || { cat "$log" >&2; echo "softshell-server exited" >&2; exit 1; }
-  sleep 0.05
-done
-[ -n "$url" ] || { cat "$log" >&2; echo "softshell-server printed no URL" >&2; exit 1; }
+source "$(dirname "$0")/../support/start_server.sh"
+start_server "$server"
+out=$(mktemp)
+remove_on_exit+=("$out")
 
 if ! SOFTSHELL=$url bash -euo pipefail "$block" >"$out"; then
   echo "the block $block failed; its output:" >&2

@@ -8,22 +8,13 @@
 
 #include <Eigen/Dense>
 
+#include "service_impl.h"  // request_bytes: one size estimate for stored requests
 #include "softshell/content_id.h"
 #include "softshell/wire.h"
 
 namespace softshell::service::internal {
 
 namespace {
-
-size_t request_size(const DeformationRequest& r) {
-  size_t bytes = sizeof(DeformationRequest) + r.vertex_constraints.size() * sizeof(VertexConstraint) +
-                 r.forces.size() * sizeof(PointForce) + r.limit_constraints.size() * sizeof(LimitConstraint) +
-                 r.surface_forces.size() * sizeof(SurfaceForce);
-  for (const auto& c : r.lagrange_constraints) {
-    bytes += sizeof(LagrangeConstraint) + c.indices.size() * sizeof(int32_t) + c.coefficients.size() * sizeof(Vec3);
-  }
-  return bytes;
-}
 
 template <class T>
 void append(std::vector<T>& to, const std::vector<T>& from) {
@@ -181,7 +172,7 @@ Result<std::shared_ptr<HoldVersion>> make_hold_version(DeformationRequest reques
   const auto digest = sha256(v->canonical);
   std::memcpy(v->key.data(), digest.data(), v->key.size());
   // The contents twice (decoded and canonical), and the hold's lease and bookkeeping.
-  v->bytes = sizeof(HoldVersion) + v->canonical.size() + request_size(request) + 512;
+  v->bytes = sizeof(HoldVersion) + v->canonical.size() + request_bytes(request) + 512;
   v->request = std::move(request);
   if (!budget.try_reserve(v->bytes)) {
     return Error{ErrorCode::kResourceExhausted,
