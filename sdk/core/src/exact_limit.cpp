@@ -135,32 +135,6 @@ Index child_face_with(const Far::TopologyLevel& parent, const Far::TopologyLevel
   return -1;
 }
 
-// Gauss-Legendre points and weights on [0, 1] (Newton on the Legendre roots).
-void gauss_legendre_01(int n, std::vector<double>& points, std::vector<double>& weights) {
-  points.assign(static_cast<size_t>(n), 0.0);
-  weights.assign(static_cast<size_t>(n), 0.0);
-  for (int i = 0; i < n; ++i) {
-    double x = std::cos(std::numbers::pi * (i + 0.75) / (n + 0.5));
-    double dp = 1.0;
-    for (int iter = 0; iter < 100; ++iter) {
-      double p0 = 1.0, p1 = x;
-      for (int k = 2; k <= n; ++k) {
-        const double p2 = ((2.0 * k - 1.0) * x * p1 - (k - 1.0) * p0) / k;
-        p0 = p1;
-        p1 = p2;
-      }
-      if (n == 1) p0 = 1.0, p1 = x;
-      dp = n * (x * p1 - p0) / (x * x - 1.0);
-      const double dx = p1 / dp;
-      x -= dx;
-      if (std::abs(dx) < 1e-16) break;
-    }
-    points[static_cast<size_t>(n - 1 - i)] = 0.5 * (x + 1.0);
-    weights[static_cast<size_t>(n - 1 - i)] = 1.0 / ((1.0 - x * x) * dp * dp);
-  }
-}
-
-
 bool extract_neighbourhood(const Far::TopologyLevel& level, Index face, int origin, Neighbourhood& out) {
   out.vertices.clear();
   out.signature.clear();

@@ -31,6 +31,8 @@
 #include <opensubdiv/far/topologyLevel.h>
 #include <opensubdiv/far/topologyRefiner.h>
 
+#include "softshell/gauss_legendre.h"
+
 namespace softshell::internal {
 
 namespace Far = OpenSubdiv::Far;
@@ -87,9 +89,6 @@ LocalRefinement refine_local(const std::vector<int32_t>& signature, int levels);
 /// The child face of `face` (next level) that contains child vertex `child`, or -1.
 Far::Index child_face_with(const Far::TopologyLevel& parent, const Far::TopologyLevel& child_level, Far::Index face,
                            Far::Index child);
-
-/// Gauss-Legendre points and weights on [0, 1].
-void gauss_legendre_01(int n, std::vector<double>& points, std::vector<double>& weights);
 
 /// The neighbourhood of a quad with one extraordinary corner (see the file comment).
 class EvConfig {

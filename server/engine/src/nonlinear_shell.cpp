@@ -115,43 +115,44 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, int gauss, int t
       for (int d = 0; d < kRows; ++d) piece.w.middleRows(d * count, count) = basis.middleRows(d * p + first, count);
       return piece;
     };
-    if (p % cell_points != 0) {
-      e.pieces.push_back(take_weights(0, p));
-    } else {
-      for (Eigen::Index first = 0; first < p; first += cell_points) {
-        double area = 0.0;
-        for (Eigen::Index q = first; q < first + cell_points; ++q) area += cell.weights[static_cast<size_t>(q)];
-        const double size = std::sqrt(area);
-        const double u0 = cell.uvs[static_cast<size_t>(first)][0] - size * gp[0];
-        const double v0 = cell.uvs[static_cast<size_t>(first)][1] - size * gp[0];
-        bool square = size > 0.0;
-        for (Eigen::Index q = 0; q < cell_points && square; ++q) {
-          const auto& uv = cell.uvs[static_cast<size_t>(first + q)];
-          square = std::abs(uv[0] - (u0 + size * gp[static_cast<size_t>(q % gauss)])) <= 1e-12 &&
-                   std::abs(uv[1] - (v0 + size * gp[static_cast<size_t>(q / gauss)])) <= 1e-12;
-        }
-        Piece piece = take_weights(first, cell_points);
-        if (square) {
-          // Fit on the unit cell: derivatives of order k carry size^k.
-          Eigen::MatrixXd scaled = piece.w;
-          for (int d = 0; d < kRows; ++d) scaled.middleRows(d * cell_points, cell_points) *= std::pow(size, kOrder[d]);
-          const Eigen::MatrixXd coef = bernstein_qr.solve(scaled);
-          const Eigen::MatrixXd back = rule.bernstein * coef;
-          bool exact = true;
-          const double overall = scaled.cwiseAbs().maxCoeff();
-          for (int d = 0; d < kRows && exact; ++d) {
-            const auto block = scaled.middleRows(d * cell_points, cell_points);
-            const double top = std::max(block.cwiseAbs().maxCoeff(), 1e-6 * overall);
-            exact = (back.middleRows(d * cell_points, cell_points) - block).cwiseAbs().maxCoeff() <= 1e-13 * top;
-          }
-          if (exact) {
-            piece.w = coef;
-            piece.size = size;
-          }
-        }
-        e.pieces.push_back(std::move(piece));
+    // The cells with the face's rule come first (face_cells); the smaller rules of deep rings
+    // toward an extraordinary vertex after them fall in runs that are not square, or in the
+    // tail, and keep their weights.
+    Eigen::Index first = 0;
+    for (; first + cell_points <= p; first += cell_points) {
+      double area = 0.0;
+      for (Eigen::Index q = first; q < first + cell_points; ++q) area += cell.weights[static_cast<size_t>(q)];
+      const double size = std::sqrt(area);
+      const double u0 = cell.uvs[static_cast<size_t>(first)][0] - size * gp[0];
+      const double v0 = cell.uvs[static_cast<size_t>(first)][1] - size * gp[0];
+      bool square = size > 0.0;
+      for (Eigen::Index q = 0; q < cell_points && square; ++q) {
+        const auto& uv = cell.uvs[static_cast<size_t>(first + q)];
+        square = std::abs(uv[0] - (u0 + size * gp[static_cast<size_t>(q % gauss)])) <= 1e-12 &&
+                 std::abs(uv[1] - (v0 + size * gp[static_cast<size_t>(q / gauss)])) <= 1e-12;
       }
+      Piece piece = take_weights(first, cell_points);
+      if (square) {
+        // Fit on the unit cell: derivatives of order k carry size^k.
+        Eigen::MatrixXd scaled = piece.w;
+        for (int d = 0; d < kRows; ++d) scaled.middleRows(d * cell_points, cell_points) *= std::pow(size, kOrder[d]);
+        const Eigen::MatrixXd coef = bernstein_qr.solve(scaled);
+        const Eigen::MatrixXd back = rule.bernstein * coef;
+        bool exact = true;
+        const double overall = scaled.cwiseAbs().maxCoeff();
+        for (int d = 0; d < kRows && exact; ++d) {
+          const auto block = scaled.middleRows(d * cell_points, cell_points);
+          const double top = std::max(block.cwiseAbs().maxCoeff(), 1e-6 * overall);
+          exact = (back.middleRows(d * cell_points, cell_points) - block).cwiseAbs().maxCoeff() <= 1e-13 * top;
+        }
+        if (exact) {
+          piece.w = coef;
+          piece.size = size;
+        }
+      }
+      e.pieces.push_back(std::move(piece));
     }
+    if (first < p) e.pieces.push_back(take_weights(first, p - first));
     // Where each (a, b) block of the element lands in K's value array.
     e.offsets.resize(static_cast<size_t>(mm * mm));
     for (Eigen::Index bl = 0; bl < mm; ++bl) {

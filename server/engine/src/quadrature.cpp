@@ -6,34 +6,6 @@
 
 namespace softshell::engine::internal {
 
-void gauss_legendre_01(int n, std::vector<double>& points, std::vector<double>& weights) {
-  // Newton iteration on the Legendre polynomial roots (Golub-Welsch would do too); exact to
-  // round-off for the small n used here.
-  points.assign(static_cast<size_t>(n), 0.0);
-  weights.assign(static_cast<size_t>(n), 0.0);
-  constexpr double kPi = 3.14159265358979323846;
-  for (int i = 0; i < n; ++i) {
-    double x = std::cos(kPi * (i + 0.75) / (n + 0.5));
-    double dp = 0.0;
-    for (int iter = 0; iter < 100; ++iter) {
-      double p0 = 1.0, p1 = x;
-      for (int k = 2; k <= n; ++k) {
-        const double p2 = ((2.0 * k - 1.0) * x * p1 - (k - 1.0) * p0) / k;
-        p0 = p1;
-        p1 = p2;
-      }
-      if (n == 1) p1 = x, p0 = 1.0;
-      dp = n * (x * p1 - p0) / (x * x - 1.0);
-      const double dx = p1 / dp;
-      x -= dx;
-      if (std::abs(dx) < 1e-16) break;
-    }
-    // Map [-1, 1] -> [0, 1]; ascending order.
-    points[static_cast<size_t>(n - 1 - i)] = 0.5 * (x + 1.0);
-    weights[static_cast<size_t>(n - 1 - i)] = 1.0 / ((1.0 - x * x) * dp * dp);  // = w / 2
-  }
-}
-
 IrregularCorners::IrregularCorners(const ControlMesh& mesh) : mesh_(mesh) {
   // Valence (faces around a vertex) and boundary status from the edges.
   const auto n = static_cast<size_t>(mesh.num_vertices());
@@ -88,8 +60,9 @@ uint8_t IrregularCorners::corners(int32_t face, int32_t subface) const {
 
 namespace {
 
-// Splits a cell while it touches an irregular corner of the unit square and levels remain.
-void refine(const Cell& cell, int levels, uint8_t mask, std::vector<Cell>& out) {
+// Splits a cell while it touches an irregular corner of the unit square and levels remain. The
+// small cells of the rings get the ring rule.
+void refine(const Cell& cell, int levels, uint8_t mask, int ring_gauss_points, std::vector<Cell>& out) {
   const std::array<std::array<double, 2>, 4> corner = {{{0, 0}, {1, 0}, {1, 1}, {0, 1}}};
   bool touches = false;
   for (int c = 0; c < 4; ++c) {
@@ -99,9 +72,10 @@ void refine(const Cell& cell, int levels, uint8_t mask, std::vector<Cell>& out) 
   }
   if (!touches || levels == 0) {
     out.push_back(cell);
+    if (!touches && cell.size <= kSmallRingCellSize) out.back().gauss_points = ring_gauss_points;
     return;
   }
-  for (const Cell& child : split(cell)) refine(child, levels - 1, mask, out);
+  for (const Cell& child : split(cell)) refine(child, levels - 1, mask, ring_gauss_points, out);
 }
 
 }  // namespace
@@ -113,7 +87,7 @@ std::array<Cell, 4> split(const Cell& cell) {
   out[1].u0 = cell.u0 + h, out[1].v0 = cell.v0;
   out[2].u0 = cell.u0 + h, out[2].v0 = cell.v0 + h;
   out[3].u0 = cell.u0, out[3].v0 = cell.v0 + h;
-  for (Cell& c : out) c.size = h;
+  for (Cell& c : out) c.size = h, c.gauss_points = cell.gauss_points;
   if (cell.ev_corner >= 0) {  // the quarter at the corner (quarter k sits at corner k)
     Cell& at_corner = out[static_cast<size_t>(cell.ev_corner)];
     at_corner.ev_corner = cell.ev_corner;
@@ -122,15 +96,17 @@ std::array<Cell, 4> split(const Cell& cell) {
   return out;
 }
 
-void face_cells(const LimitEvaluator& evaluator, int32_t face, int32_t subface, int gauss_points, int levels,
-                uint8_t corner_mask, std::vector<Cell>& out) {
+void face_cells(const LimitEvaluator& evaluator, int32_t face, int32_t subface, int gauss_points,
+                int ring_gauss_points, int levels, uint8_t corner_mask, std::vector<Cell>& out) {
   out.clear();
   const auto corners = static_cast<uint8_t>(corner_mask & 0xfu);
   if ((corner_mask & kSplitOnce) && !(corners && levels > 0)) {
     for (const Cell& quarter : split(Cell{})) out.push_back(quarter);
   } else {
-    refine(Cell{}, corners ? levels : 0, corners, out);
+    refine(Cell{}, corners ? levels : 0, corners, ring_gauss_points == gauss_points ? 0 : ring_gauss_points, out);
   }
+  // The face's rule first: the nonlinear model reads runs of gauss_points^2 points as cells.
+  std::stable_partition(out.begin(), out.end(), [](const Cell& cell) { return cell.gauss_points == 0; });
   // The cells at an extraordinary corner.
   for (Cell& cell : out) {
     for (int c = 0; c < 4; ++c) {
@@ -145,21 +121,23 @@ void face_cells(const LimitEvaluator& evaluator, int32_t face, int32_t subface, 
   }
 }
 
-void cell_points(const std::vector<Cell>& cells, const std::vector<double>& gauss_points,
-                 const std::vector<double>& gauss_weights, std::vector<std::array<double, 2>>& out_uv,
-                 std::vector<double>& out_weight) {
+void cell_points(const std::vector<Cell>& cells, int gauss_points, std::vector<std::array<double, 2>>& out_uv,
+                 std::vector<double>& out_weight, std::vector<size_t>& first_point) {
   out_uv.clear();
   out_weight.clear();
-  const size_t g = gauss_points.size();
+  first_point.assign(1, 0);
   for (const Cell& cell : cells) {
+    const GaussRule& rule = gauss_legendre(cell.gauss_points > 0 ? cell.gauss_points : gauss_points);
+    const size_t g = rule.points.size();
     const bool factors = cell.weight_factors.size() == g * g;
     for (size_t j = 0; j < g; ++j) {
       for (size_t i = 0; i < g; ++i) {
-        out_uv.push_back({cell.u0 + cell.size * gauss_points[i], cell.v0 + cell.size * gauss_points[j]});
-        out_weight.push_back(cell.size * cell.size * gauss_weights[i] * gauss_weights[j] *
+        out_uv.push_back({cell.u0 + cell.size * rule.points[i], cell.v0 + cell.size * rule.points[j]});
+        out_weight.push_back(cell.size * cell.size * rule.weights[i] * rule.weights[j] *
                              (factors ? cell.weight_factors[i + g * j] : 1.0));
       }
     }
+    first_point.push_back(out_uv.size());
   }
 }
 

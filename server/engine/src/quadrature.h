@@ -16,13 +16,11 @@
 #include <Eigen/Core>
 
 #include "softshell/control_mesh.h"
+#include "softshell/gauss_legendre.h"
 #include "softshell/engine/shell_model.h"
 #include "softshell/limit_evaluator.h"
 
 namespace softshell::engine::internal {
-
-/// Gauss-Legendre points and weights on [0, 1].
-void gauss_legendre_01(int n, std::vector<double>& points, std::vector<double>& weights);
 
 /// Which corners of each (face, sub-face) domain need refinement: bit c set for corner c in the
 /// protocol's order (0 = (0,0), 1 = (1,0), 2 = (1,1), 3 = (0,1)); kSplitOnce set for a quad that
@@ -47,22 +45,30 @@ struct Cell {
   /// corner (0..3) and the factors of its Gauss weights (LimitEvaluator::ev_corner_weights).
   int ev_corner = -1;
   std::vector<double> weight_factors;
+  /// Points per direction of its Gauss rule (0 = the face's, QuadratureOptions::gauss_points).
+  int gauss_points = 0;
 };
+
+/// Ring cells this small or smaller (depth 3 and deeper toward an irregular corner) get
+/// QuadratureOptions::ev_ring_gauss_points.
+inline constexpr double kSmallRingCellSize = 0.125;
 
 /// Its four quarters (the one at an extraordinary corner keeps the corner's weight factors).
 std::array<Cell, 4> split(const Cell& cell);
 
 /// The cells of one (sub-)face: the unit square split dyadically `levels` times toward each
 /// corner in `corner_mask`, and at least once if it has kSplitOnce. Their areas sum to 1. The
-/// cells at an extraordinary corner get the evaluator's weight factors for `gauss_points`.
-void face_cells(const LimitEvaluator& evaluator, int32_t face, int32_t subface, int gauss_points, int levels,
-                uint8_t corner_mask, std::vector<Cell>& out);
+/// cells at an extraordinary corner get the evaluator's weight factors for `gauss_points`; ring
+/// cells of kSmallRingCellSize or smaller get `ring_gauss_points` (0 = `gauss_points`). Cells
+/// with the face's rule come first.
+void face_cells(const LimitEvaluator& evaluator, int32_t face, int32_t subface, int gauss_points,
+                int ring_gauss_points, int levels, uint8_t corner_mask, std::vector<Cell>& out);
 
-/// The tensor Gauss rule (points and weights on [0, 1]) on each cell, cell after cell; the
-/// weights include the cell's area (and its weight factors).
-void cell_points(const std::vector<Cell>& cells, const std::vector<double>& gauss_points,
-                 const std::vector<double>& gauss_weights, std::vector<std::array<double, 2>>& out_uv,
-                 std::vector<double>& out_weight);
+/// The tensor Gauss rule on each cell (Cell::gauss_points, or `gauss_points` where that is 0),
+/// cell after cell; the weights include the cell's area (and its weight factors). The points of
+/// cell c are [first_point[c], first_point[c + 1]).
+void cell_points(const std::vector<Cell>& cells, int gauss_points, std::vector<std::array<double, 2>>& out_uv,
+                 std::vector<double>& out_weight, std::vector<size_t>& first_point);
 
 /// The pressure load (integral of N_A n dA, 3 x indices.size(), columns for the control points
 /// `indices`) of the cells at extraordinary corners, exactly (LimitEvaluator::

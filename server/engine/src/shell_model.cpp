@@ -55,22 +55,19 @@ double cell_distortion(const Eigen::MatrixXd& basis, const Eigen::MatrixX3d& x, 
 
 void integrate_element(const LimitEvaluator& evaluator, const Material& material, const QuadratureOptions& quad,
                        const FaceWork& work, Element& out) {
-  std::vector<double> gauss_points, gauss_weights;
-  internal::gauss_legendre_01(quad.gauss_points, gauss_points, gauss_weights);
-  const auto per_cell = static_cast<Eigen::Index>(gauss_points.size() * gauss_points.size());
-
   // The cells: dyadic toward extraordinary corners, then split where the parametrization is far
   // from uniform, one round of stencil evaluations per split level.
   std::vector<internal::Cell> cells, accepted, next;
-  internal::face_cells(evaluator, work.face, work.subface, quad.gauss_points, quad.ev_refinement_levels,
-                       work.corner_mask, cells);
+  internal::face_cells(evaluator, work.face, work.subface, quad.gauss_points, quad.ev_ring_gauss_points,
+                       quad.ev_refinement_levels, work.corner_mask, cells);
   std::vector<std::array<double, 2>> uvs;
   std::vector<double> weights;
+  std::vector<size_t> first_point;
   Eigen::MatrixXd basis;
   Eigen::MatrixX3d x;
   bool split_any = false;
   for (int round = 0;; ++round) {
-    internal::cell_points(cells, gauss_points, gauss_weights, uvs, weights);
+    internal::cell_points(cells, quad.gauss_points, uvs, weights, first_point);
     evaluator.face_stencils(work.face, work.subface, uvs, out.indices, basis);
     if (round == 0) {
       x.resize(static_cast<Eigen::Index>(out.indices.size()), 3);
@@ -86,7 +83,8 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
     for (size_t c = 0; c < cells.size(); ++c) {
       // Cells at an extraordinary vertex are never uniform; their rule is made for them.
       if (cells[c].ev_corner < 0 &&
-          cell_distortion(basis, x, static_cast<Eigen::Index>(c) * per_cell, per_cell) > quad.max_cell_distortion) {
+          cell_distortion(basis, x, static_cast<Eigen::Index>(first_point[c]),
+                          static_cast<Eigen::Index>(first_point[c + 1] - first_point[c])) > quad.max_cell_distortion) {
         const auto quarters = internal::split(cells[c]);
         next.insert(next.end(), quarters.begin(), quarters.end());
       } else {
@@ -98,7 +96,7 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
     cells.swap(next);
   }
   if (split_any) {  // the stencils of the final cells, in one evaluation
-    internal::cell_points(accepted, gauss_points, gauss_weights, uvs, weights);
+    internal::cell_points(accepted, quad.gauss_points, uvs, weights, first_point);
     evaluator.face_stencils(work.face, work.subface, uvs, out.indices, basis);
   }
   const auto m = x.rows();
@@ -111,6 +109,11 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
   std::vector<char> exact_load;  // cells at an extraordinary vertex: their pressure load exactly
   out.normal_weights = internal::exact_corner_normal_weights(evaluator, work.face, work.subface, accepted, out.indices,
                                                              exact_load);
+  std::vector<char> point_exact_load(uvs.size(), 0);
+  for (size_t c = 0; c < accepted.size(); ++c) {
+    std::fill(point_exact_load.begin() + static_cast<std::ptrdiff_t>(first_point[c]),
+              point_exact_load.begin() + static_cast<std::ptrdiff_t>(first_point[c + 1]), exact_load[c]);
+  }
   internal::SurfaceFrame frame;
   // K_e = sum over points of dA (Bm^T t C Bm + Bb^T t^3/12 C Bb). With C = L L^T, every term is
   // G_q^T G_q for G_q = [sqrt(dA t) L^T Bm; sqrt(dA t^3/12) L^T Bb]: the rows of all points are
@@ -135,7 +138,7 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
     internal::weighted_strain_rows(w, frame, std::sqrt(dA * membrane) * lt, std::sqrt(dA * bending) * lt,
                                    g.middleRows(static_cast<Eigen::Index>(6 * q), 6));
     out.area_weights.noalias() += dA * w.row(0).transpose();
-    if (!exact_load[q / static_cast<size_t>(per_cell)]) out.normal_weights.noalias() += frame.a3 * (dA * w.row(0));
+    if (!point_exact_load[q]) out.normal_weights.noalias() += frame.a3 * (dA * w.row(0));
     out.area += dA;
     out.points.push_back({SurfacePoint{work.face, work.subface, uvs[q][0], uvs[q][1]}, weights[q]});
   }
@@ -229,11 +232,12 @@ std::shared_ptr<const ShellModel> ShellModelBuilder::build(const ControlMesh& me
   const auto start = std::chrono::steady_clock::now();
   material.check().value();
   const QuadratureOptions& quad = options.quadrature;
-  if (quad.gauss_points < 1 || quad.gauss_points > 10 || quad.ev_refinement_levels < 0 ||
+  if (quad.gauss_points < 1 || quad.gauss_points > 10 || quad.ev_ring_gauss_points < 0 ||
+      quad.ev_ring_gauss_points > 10 || quad.ev_refinement_levels < 0 ||
       quad.ev_refinement_levels > 8 || quad.max_distortion_splits < 0 || quad.max_distortion_splits > 6 ||
       !std::isfinite(quad.max_cell_distortion) || (quad.max_cell_distortion != 0.0 && quad.max_cell_distortion < 1.0)) {
     fail(ErrorCode::kInvalidArgument,
-         "quadrature: gauss_points must be 1..10, ev_refinement_levels 0..8, max_distortion_splits 0..6 and "
+         "quadrature: gauss_points must be 1..10, ev_ring_gauss_points 0..10, ev_refinement_levels 0..8, max_distortion_splits 0..6 and "
          "max_cell_distortion 0 (off) or at least 1");
   }
   // Sharp creases and corners make the limit surface C0 (or nearly so) along them: a

@@ -30,11 +30,16 @@ struct QuadratureOptions {
   /// is integrated exactly (for the integrands that are polynomial), the innermost cell, which
   /// holds the infinitely many rings below, by a Gauss rule re-weighted to integrate the
   /// self-similar leading term exactly; its pressure load is integrated exactly in closed form.
-  /// What remains shrinks ~10x per level: the membrane patch test (exact answer: an affine
-  /// field) is met to 1e-8 with 4 levels, 2e-9 with 5, 6e-10 with 6, on flat meshes with
-  /// valence 3, 5, 6 and boundary extraordinary vertices and n-gons; each level costs 3 cells per
-  /// extraordinary corner (catmark_righthanded: +33% precompute). Range 0..8.
-  int ev_refinement_levels = 4;
+  /// What remains shrinks ~3-10x per level: the membrane patch test (exact answer: an affine
+  /// field) is met to 2e-8 with 4 levels, 2e-9 with 5, 7e-10 with 6 (the default), on flat meshes
+  /// with valence 3, 5, 6 and boundary extraordinary vertices and n-gons. Each level adds 3 cells
+  /// per extraordinary corner. Range 0..8.
+  int ev_refinement_levels = 6;
+  /// Gauss points per direction on the ring cells of 1/8 of the face's side or smaller (depth 3
+  /// and deeper). 3 integrate the flat membrane integrand there (degree 5 per direction)
+  /// exactly, and the deep rings are a small part of the face, so levels 5 and 6 cost about what
+  /// levels 3 and 4 cost with the face's rule. 0 = `gauss_points`. Range 0..10.
+  int ev_ring_gauss_points = 3;
   /// Cells whose parametrization is strongly non-uniform are split 2 x 2, up to
   /// `max_distortion_splits` times: those where the area element or the length of a tangent
   /// varies by more than this factor between the cell's Gauss points. Such faces appear where
