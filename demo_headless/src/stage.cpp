@@ -8,6 +8,7 @@
 #include <limits>
 #include <numeric>
 
+#include "softshell/disjoint_sets.h"
 #include "softshell/interaction.h"
 
 namespace softshell::demo {
@@ -25,20 +26,16 @@ using Vec2 = Eigen::Vector2d;
 
 // Connected pieces of the mesh (faces sharing a control point), numbered 0.. in face order.
 std::vector<int32_t> parts_of_faces(const ControlMesh& mesh, int& count) {
-  std::vector<int32_t> root(static_cast<size_t>(mesh.num_vertices()));
-  std::iota(root.begin(), root.end(), 0);
-  const auto find = [&](int32_t v) {
-    while (root[static_cast<size_t>(v)] != v) v = root[static_cast<size_t>(v)] = root[static_cast<size_t>(root[static_cast<size_t>(v)])];
-    return v;
-  };
+  DisjointSets parts(static_cast<size_t>(mesh.num_vertices()));
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     const auto face = mesh.face(f);
-    for (int32_t v : face) root[static_cast<size_t>(find(v))] = find(face[0]);
+    for (int32_t v : face) parts.unite(v, face[0]);
   }
-  std::vector<int32_t> number(root.size(), -1), out(static_cast<size_t>(mesh.num_faces()));
+  // Numbered in face order (the first face's part is 0).
+  std::vector<int32_t> number(parts.size(), -1), out(static_cast<size_t>(mesh.num_faces()));
   count = 0;
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
-    int32_t& n = number[static_cast<size_t>(find(mesh.face(f)[0]))];
+    int32_t& n = number[static_cast<size_t>(parts.find(mesh.face(f)[0]))];
     if (n < 0) n = count++;
     out[static_cast<size_t>(f)] = n;
   }

@@ -5,8 +5,6 @@
 #include <string>
 
 namespace softshell {
-namespace {
-
 std::string describe_number(double v) {
   if (std::isnan(v)) return "NaN";
   if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
@@ -14,6 +12,8 @@ std::string describe_number(double v) {
   auto [ptr, ec] = std::to_chars(buf, buf + sizeof buf, v);
   return ec == std::errc() ? std::string(buf, ptr) : std::string("?");
 }
+
+namespace {
 
 Result<void> bad(std::string message) { return Error{ErrorCode::kInvalidArgument, std::move(message)}; }
 

@@ -10,7 +10,7 @@ namespace {
 
 using internal::ByteReader;
 using internal::ByteWriter;
-using internal::describe_number;
+using softshell::describe_number;
 using internal::fits_f32;
 
 [[noreturn]] void bad(const std::string& message) { fail(ErrorCode::kInvalidArgument, message); }

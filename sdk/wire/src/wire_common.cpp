@@ -9,18 +9,6 @@
 
 namespace softshell::wire {
 
-namespace internal {
-
-std::string describe_number(double v) {
-  if (std::isnan(v)) return "NaN";
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  char buf[32];
-  auto [ptr, ec] = std::to_chars(buf, buf + sizeof buf, v);
-  return ec == std::errc() ? std::string(buf, ptr) : std::string("?");
-}
-
-}  // namespace internal
-
 std::string_view media_type(Format format) {
   return format == Format::kBinary ? kBinaryMediaType : kJsonMediaType;
 }

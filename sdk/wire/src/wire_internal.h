@@ -9,6 +9,7 @@
 #include <string>
 #include <string_view>
 
+#include "softshell/request_validation.h"
 #include "softshell/result.h"
 
 namespace softshell::wire::internal {
@@ -69,7 +70,5 @@ inline bool fits_f32(double v) {
 /// True if `v` converts to f32 and back without change.
 inline bool exact_f32(double v) { return fits_f32(v) && static_cast<double>(static_cast<float>(v)) == v; }
 
-/// "NaN", "inf" or "-inf" for a non-finite value, the number otherwise.
-std::string describe_number(double v);
 
 }  // namespace softshell::wire::internal

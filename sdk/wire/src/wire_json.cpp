@@ -21,7 +21,7 @@ namespace softshell::wire {
 namespace {
 
 using json = nlohmann::json;
-using internal::describe_number;
+using softshell::describe_number;
 
 [[noreturn]] void bad(const std::string& message) { fail(ErrorCode::kInvalidArgument, message); }
 

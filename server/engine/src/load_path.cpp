@@ -3,6 +3,8 @@
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 
+#include "softshell/disjoint_sets.h"
+
 namespace softshell::engine::internal {
 
 PrescribedPath::PrescribedPath(const ControlMesh& mesh, const Problem& p, const Eigen::VectorXd& u0)
@@ -13,25 +15,17 @@ PrescribedPath::PrescribedPath(const ControlMesh& mesh, const Problem& p, const 
   std::vector<char> full(n, 0);
   for (size_t v = 0; v < n; ++v) full[v] = p.is_fixed[3 * v] && p.is_fixed[3 * v + 1] && p.is_fixed[3 * v + 2];
   // Connected sets of fully prescribed control points (mesh edges between them).
-  std::vector<int32_t> parent(n);
-  for (size_t v = 0; v < n; ++v) parent[v] = static_cast<int32_t>(v);
-  auto find = [&](int32_t v) {
-    while (parent[static_cast<size_t>(v)] != v) {
-      parent[static_cast<size_t>(v)] = parent[static_cast<size_t>(parent[static_cast<size_t>(v)])];
-      v = parent[static_cast<size_t>(v)];
-    }
-    return v;
-  };
+  DisjointSets joined(n);
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     auto fv = mesh.face(f);
     for (size_t i = 0; i < fv.size(); ++i) {
       const int32_t a = fv[i], b = fv[(i + 1) % fv.size()];
-      if (full[static_cast<size_t>(a)] && full[static_cast<size_t>(b)]) parent[static_cast<size_t>(find(a))] = find(b);
+      if (full[static_cast<size_t>(a)] && full[static_cast<size_t>(b)]) joined.unite(a, b);
     }
   }
   std::vector<std::vector<int32_t>> sets(n);
   for (size_t v = 0; v < n; ++v) {
-    if (full[v]) sets[static_cast<size_t>(find(static_cast<int32_t>(v)))].push_back(static_cast<int32_t>(v));
+    if (full[v]) sets[static_cast<size_t>(joined.find(static_cast<int32_t>(v)))].push_back(static_cast<int32_t>(v));
   }
   for (auto& points : sets) {
     if (points.size() < 3) continue;

@@ -457,7 +457,7 @@ bool Run::solve_step(double lambda, double tolerance) {
 double Run::check_answer(const Eigen::VectorXd& u) {
   // The same allowances as the linear check (solver.cpp); the equilibrium's is a margin over the
   // Newton tolerance, so that only a state that is not the converged one fails it.
-  constexpr double kConstraint = 1e-9, kGeometry = 1e-13, kRoundOff = 1e-12, kEquilibriumMargin = 10.0;
+  constexpr double kEquilibriumMargin = 10.0;
   const std::string refused = "the nonlinear solve produced no accurate answer: ";
   if (!u.allFinite()) fail(ErrorCode::kUnprocessable, refused + "the displacements are not finite");
   for (int32_t dof : problem_.fixed) {
@@ -479,13 +479,7 @@ double Run::check_answer(const Eigen::VectorXd& u) {
   double displacement_scale = u.cwiseAbs().maxCoeff();
   for (const Row& row : problem_.rows) displacement_scale = std::max(displacement_scale, std::abs(row.rhs) / row.scale);
   for (const Row& row : problem_.rows) {
-    double lhs = 0.0, terms = std::abs(row.rhs);
-    for (const auto& [dof, coef] : row.terms) {
-      lhs += coef * u[dof];
-      terms += std::abs(coef * u[dof]);
-    }
-    const double residual = std::abs(lhs - row.rhs);
-    const double allowed = row.scale * (kConstraint * displacement_scale + kGeometry * size) + kRoundOff * terms;
+    const auto [residual, allowed] = internal::check_row(row, u, displacement_scale, size);
     worst = std::max(worst, residual / allowed);
     if (!(residual <= allowed)) {
       fail(ErrorCode::kUnprocessable, refused + row.source + " is off by " + internal::format_number(residual) +

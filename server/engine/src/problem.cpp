@@ -327,4 +327,13 @@ Pins choose_pins(const ShellModel& model, const std::vector<int32_t>& fixed) {
   return pins;
 }
 
+RowCheck check_row(const Row& row, const Eigen::VectorXd& u, double displacement_scale, double size) {
+  double lhs = 0.0, terms = std::abs(row.rhs);
+  for (const auto& [dof, coef] : row.terms) {
+    lhs += coef * u[dof];
+    terms += std::abs(coef * u[dof]);
+  }
+  return {std::abs(lhs - row.rhs), row.scale * (kConstraint * displacement_scale + kGeometry * size) + kRoundOff * terms};
+}
+
 }  // namespace softshell::engine::internal

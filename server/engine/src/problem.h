@@ -54,4 +54,20 @@ Pins choose_pins(const ShellModel& model, const std::vector<int32_t>& fixed);
 std::string format_number(double x);
 std::string axis_name(int a);
 
+/// How far an answer may miss a constraint row, for every solver's final check: kConstraint of
+/// the problem's displacement scale (the largest displacement of the answer, prescribed value or
+/// constraint target) plus kGeometry of the object's size (coordinates carry ~1e-16 of it, so
+/// residuals below that are round-off however small the displacements), both times the row's
+/// scale, plus kRoundOff of the sum of the magnitudes of its terms (what evaluating it in double
+/// precision can lose).
+inline constexpr double kConstraint = 1e-9;
+inline constexpr double kGeometry = 1e-13;
+inline constexpr double kRoundOff = 1e-12;
+
+struct RowCheck {
+  double residual = 0.0;  ///< |row . u - rhs|
+  double allowed = 0.0;   ///< what the rule above allows it
+};
+RowCheck check_row(const Row& row, const Eigen::VectorXd& u, double displacement_scale, double size);
+
 }  // namespace softshell::engine::internal

@@ -9,6 +9,7 @@
 
 #include <Eigen/Dense>
 
+#include "softshell/disjoint_sets.h"
 #include "softshell/executor.h"
 
 #include "kirchhoff_love.h"
@@ -159,30 +160,13 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
 // Connected components by shared control points (union-find), then 6 rigid modes each.
 void compute_rigid_modes(const ControlMesh& mesh, std::vector<int32_t>& component_of, Eigen::MatrixXd& modes) {
   const auto n = static_cast<size_t>(mesh.num_vertices());
-  std::vector<int32_t> parent(n);
-  for (size_t i = 0; i < n; ++i) parent[i] = static_cast<int32_t>(i);
-  auto find = [&](int32_t v) {
-    while (parent[static_cast<size_t>(v)] != v) {
-      parent[static_cast<size_t>(v)] = parent[static_cast<size_t>(parent[static_cast<size_t>(v)])];
-      v = parent[static_cast<size_t>(v)];
-    }
-    return v;
-  };
+  DisjointSets parts(n);
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     auto fv = mesh.face(f);
-    for (size_t i = 1; i < fv.size(); ++i) {
-      const int32_t a = find(fv[0]), b = find(fv[i]);
-      if (a != b) parent[static_cast<size_t>(std::max(a, b))] = std::min(a, b);
-    }
+    for (size_t i = 1; i < fv.size(); ++i) parts.unite(fv[0], fv[i]);
   }
-  component_of.assign(n, -1);
-  std::vector<int32_t> label(n, -1);
   int32_t components = 0;
-  for (size_t v = 0; v < n; ++v) {
-    const auto root = static_cast<size_t>(find(static_cast<int32_t>(v)));
-    if (label[root] < 0) label[root] = components++;
-    component_of[v] = label[root];
-  }
+  component_of = parts.labels(components);
   // Centroid and size of every component.
   std::vector<Vec3> centre(static_cast<size_t>(components), Vec3::Zero());
   std::vector<int32_t> count(static_cast<size_t>(components), 0);

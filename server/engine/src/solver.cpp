@@ -42,18 +42,13 @@ constexpr size_t kMaxExtraRows = 96;
 //
 // Equilibrium: on every DOF that is not prescribed, r = f - K u - C^T lambda against
 // kEquilibrium times the problem's force scale (the largest load, reaction or internal force).
-// Constraints: C u - d against kConstraint times the problem's displacement scale (the largest
-// displacement of the answer, every prescribed value, every constraint's target) and against
-// kGeometry times the object's size: coordinates carry ~1e-16 of it, so residuals below that are
-// round-off, however small the displacements (a floor that holds an object where it is asks for
-// displacements of ~1e-13 that contradict each other at round-off). Each residual is also
-// allowed kRoundOff of the sum of the magnitudes of its terms (what evaluating it in double
-// precision can lose). The path's answer passes if every ratio residual / allowance is <= 1; the
-// fast path refines until it is <= kConverged.
+// Constraints: C u - d within check_row's allowance (problem.h: a share of the displacements,
+// of the object's size and of the round-off of the row's terms; a floor that holds an object
+// where it is asks for displacements of ~1e-13 that contradict each other at round-off). Each
+// equilibrium residual is also allowed kRoundOff of the sum of the magnitudes of its terms. The
+// path's answer passes if every ratio residual / allowance is <= 1; the fast path refines until
+// it is <= kConverged.
 constexpr double kEquilibrium = 1e-8;
-constexpr double kConstraint = 1e-9;
-constexpr double kGeometry = 1e-13;
-constexpr double kRoundOff = 1e-12;
 constexpr double kConverged = 1e-3;
 
 struct Verdict {
@@ -101,7 +96,7 @@ Verdict judge(const ShellModel& model, const Problem& p, const Eigen::VectorXd& 
     if (residual > kConverged * allowed) {  // add the round-off of this row (K is symmetric: column i)
       double terms = std::abs(p.load[i]) + reaction_size[i];
       for (Eigen::SparseMatrix<double>::InnerIterator it(k, i); it; ++it) terms += std::abs(it.value() * u[it.row()]);
-      allowed += kRoundOff * terms;
+      allowed += internal::kRoundOff * terms;
     }
     if (residual > v.worst * allowed) {
       v = Verdict{residual / allowed, false, 0, static_cast<int32_t>(i), residual, force_scale, true};
@@ -111,14 +106,7 @@ Verdict judge(const ShellModel& model, const Problem& p, const Eigen::VectorXd& 
   for (int32_t dof : p.fixed) displacement_scale = std::max(displacement_scale, std::abs(p.fixed_value[dof]));
   for (const Row& row : p.rows) displacement_scale = std::max(displacement_scale, std::abs(row.rhs) / row.scale);
   for (size_t r = 0; r < p.rows.size(); ++r) {
-    const Row& row = p.rows[r];
-    double lhs = 0.0, terms = std::abs(row.rhs);
-    for (const auto& [dof, coef] : row.terms) {
-      lhs += coef * u[dof];
-      terms += std::abs(coef * u[dof]);
-    }
-    const double residual = std::abs(lhs - row.rhs);
-    const double allowed = row.scale * (kConstraint * displacement_scale + kGeometry * size) + kRoundOff * terms;
+    const auto [residual, allowed] = check_row(p.rows[r], u, displacement_scale, size);
     if (residual > v.worst * allowed) v = Verdict{residual / allowed, true, r, -1, residual, displacement_scale, true};
   }
   return v;

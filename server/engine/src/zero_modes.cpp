@@ -8,6 +8,8 @@
 
 #include <Eigen/Dense>
 
+#include "softshell/disjoint_sets.h"
+
 #include "factorization.h"
 
 namespace softshell::engine::internal {
@@ -140,15 +142,7 @@ void find_extra_zero_modes(const Eigen::SparseMatrix<double>& gram, const std::v
 // Surface pieces by shared edges of faces with a limit surface.
 void check_surface_connected(const ControlMesh& mesh, const LimitEvaluator& evaluator,
                              const std::vector<int32_t>& component_of) {
-  std::vector<int32_t> parent(static_cast<size_t>(mesh.num_faces()));
-  for (size_t f = 0; f < parent.size(); ++f) parent[f] = static_cast<int32_t>(f);
-  auto find = [&](int32_t f) {
-    while (parent[static_cast<size_t>(f)] != f) {
-      parent[static_cast<size_t>(f)] = parent[static_cast<size_t>(parent[static_cast<size_t>(f)])];
-      f = parent[static_cast<size_t>(f)];
-    }
-    return f;
-  };
+  DisjointSets pieces(static_cast<size_t>(mesh.num_faces()));
   std::map<std::pair<int32_t, int32_t>, int32_t> edge_face;
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     if (!evaluator.has_limit_surface(f)) continue;
@@ -156,18 +150,15 @@ void check_surface_connected(const ControlMesh& mesh, const LimitEvaluator& eval
     for (size_t i = 0; i < fv.size(); ++i) {
       const int32_t a = fv[i], b = fv[(i + 1) % fv.size()];
       const auto [it, inserted] = edge_face.emplace(std::pair{std::min(a, b), std::max(a, b)}, f);
-      if (!inserted) {
-        const int32_t x = find(f), y = find(it->second);
-        if (x != y) parent[static_cast<size_t>(std::max(x, y))] = std::min(x, y);
-      }
+      if (!inserted) pieces.unite(f, it->second);
     }
   }
   std::map<int32_t, int32_t> piece_of_component;  // a surface piece seen per part
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     if (!evaluator.has_limit_surface(f)) continue;
     const int32_t component = component_of[static_cast<size_t>(mesh.face(f)[0])];
-    const auto [it, inserted] = piece_of_component.emplace(component, find(f));
-    if (!inserted && it->second != find(f)) {
+    const auto [it, inserted] = piece_of_component.emplace(component, pieces.find(f));
+    if (!inserted && it->second != pieces.find(f)) {
       fail(ErrorCode::kUnprocessable,
            "the limit surface of one part of the mesh falls apart into pieces (faces " + std::to_string(it->second) +
                " and " + std::to_string(f) +

@@ -25,7 +25,14 @@ Error unknown_hold(const GeomId& id, std::string_view hold_id) {
   return Error{ErrorCode::kNotFound, "geometry " + id.hex() + " has no hold '" + std::string(hold_id) + "'"};
 }
 
-HoldPromise new_promise() { return std::make_shared<std::promise<Result<HoldOutcome>>>(); }
+// A ticket for a change of `hold_id` and the promise that answers it.
+HoldTicket new_ticket(const std::string& hold_id, HoldPromise& promise) {
+  promise = std::make_shared<std::promise<Result<HoldOutcome>>>();
+  HoldTicket ticket;
+  ticket.hold_id = hold_id;
+  ticket.outcome = promise->get_future().share();
+  return ticket;
+}
 
 void apply(HoldMap& holds, const HoldChange& change) {
   if (change.version) {
@@ -367,10 +374,8 @@ Result<HoldTicket> Service::put_hold(const GeomId& id, const std::string& hold_i
     }
     std::shared_ptr<HoldVersion> version = std::move(*made);
 
-    HoldTicket ticket;
-    ticket.hold_id = hold_id;
-    HoldPromise promise = new_promise();
-    ticket.outcome = promise->get_future().share();
+    HoldPromise promise;
+    HoldTicket ticket = new_ticket(hold_id, promise);
     bool launch = false;
     {
       std::lock_guard lock(e->mu);
@@ -451,10 +456,8 @@ Result<HoldTicket> Service::release_hold(const GeomId& id, const std::string& ho
     if (auto ok = wire::check_hold_id(hold_id); !ok) return ok.error();
     auto e = impl_->find(id);
     if (!e) return not_found(id);
-    HoldTicket ticket;
-    ticket.hold_id = hold_id;
-    HoldPromise promise = new_promise();
-    ticket.outcome = promise->get_future().share();
+    HoldPromise promise;
+    HoldTicket ticket = new_ticket(hold_id, promise);
     bool launch = false;
     {
       std::lock_guard lock(e->mu);

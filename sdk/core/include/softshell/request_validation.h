@@ -5,6 +5,7 @@
 /// the same message. Code behind the boundary (the engine) asserts what it established.
 
 #include <cstdint>
+#include <string>
 
 #include "softshell/deformation.h"
 #include "softshell/limit_evaluator.h"
@@ -34,5 +35,9 @@ Result<void> validate(const LimitConstraint& c, size_t position, const RequestCo
 Result<void> validate(const SurfaceForce& f, size_t position, const RequestContext& context);
 /// The surface load and the pressure.
 Result<void> validate_loads(const Vec3& surface_load, double pressure);
+
+/// A number as validation messages show it: the shortest form that reads back as it, or "NaN",
+/// "inf", "-inf".
+std::string describe_number(double v);
 
 }  // namespace softshell
