@@ -20,12 +20,15 @@ Result<HeldResult> answer(service::Service& service, const GeomId& id, const Res
   return held(*outcome->result);
 }
 
-// The service's subscription, kept alive by the EventSubscription.
+// The service's subscription, kept alive by the EventSubscription, with the service it is
+// registered with (the subscription may outlive the session).
 class ServiceSource final : public EventSubscription::Source {
  public:
-  explicit ServiceSource(std::unique_ptr<service::Subscription> s) : subscription_(std::move(s)) {}
+  ServiceSource(std::shared_ptr<service::Service> service, std::unique_ptr<service::Subscription> s)
+      : service_(std::move(service)), subscription_(std::move(s)) {}
 
  private:
+  std::shared_ptr<service::Service> service_;             // destroyed last
   std::unique_ptr<service::Subscription> subscription_;
 };
 
@@ -94,7 +97,7 @@ Result<std::unique_ptr<EventSubscription>> EmbeddedSession::subscribe(const Geom
   if (!newest) return newest.error();
   if (*newest) feed->offer(held(**newest));
   feed->set_live();
-  return std::make_unique<EventSubscription>(feed, std::make_unique<ServiceSource>(std::move(*subscription)));
+  return std::make_unique<EventSubscription>(feed, std::make_unique<ServiceSource>(service_, std::move(*subscription)));
 }
 
 }  // namespace softshell
