@@ -116,6 +116,7 @@ class StreamSource final : public EventSubscription::Source {
     }
     if (stopping_.load()) return status == 200;
     if (status == 200) {
+      if (bad_event) return true;  // (the reason is set already)
       feed_->set_connecting(Error{ErrorCode::kUnavailable, res ? "the event stream from " + url_ + " ended"
                                                                : remote::transport_error(res.error(), url_, options_)});
       return true;
