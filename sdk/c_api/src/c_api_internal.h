@@ -13,6 +13,7 @@
 #include <future>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -47,6 +48,22 @@ struct DeformationObject {
   bool ready() const { return future.wait_for(std::chrono::seconds(0)) == std::future_status::ready; }
 };
 
+/// An asynchronous put of a hold.
+struct HoldPutObject {
+  std::shared_ptr<Session> session;
+  std::string hold_id;
+  std::shared_future<Result<HeldResult>> future;
+  bool ready() const { return future.wait_for(std::chrono::seconds(0)) == std::future_status::ready; }
+};
+
+/// A subscription, and a result taken from it that did not fit the caller's buffer yet.
+struct SubscriptionObject {
+  std::shared_ptr<Session> session;  // (destroyed after the subscription)
+  std::unique_ptr<EventSubscription> subscription;
+  std::mutex mu;
+  std::optional<HeldResult> held_back;
+};
+
 enum class Kind : uint8_t {
   kNone = 0,
   kMesh,
@@ -59,6 +76,8 @@ enum class Kind : uint8_t {
   kSession,
   kDeformation,
   kStressField,
+  kHoldPut,
+  kSubscription,
 };
 /// "ss_mesh", "ss_evaluator", ...
 const char* kind_name(Kind kind);
@@ -82,6 +101,8 @@ SOFTSHELL_C_HANDLE(ss_refinement, kRefinement, MeshRefinement)
 SOFTSHELL_C_HANDLE(ss_session, kSession, Session)
 SOFTSHELL_C_HANDLE(ss_deformation, kDeformation, DeformationObject)
 SOFTSHELL_C_HANDLE(ss_stress_field, kStressField, StressField)
+SOFTSHELL_C_HANDLE(ss_hold_put, kHoldPut, HoldPutObject)
+SOFTSHELL_C_HANDLE(ss_subscription, kSubscription, SubscriptionObject)
 #undef SOFTSHELL_C_HANDLE
 
 // ------------------------------------------------------------------------------------------------

@@ -39,6 +39,8 @@ const char* kind_name(Kind kind) {
     case Kind::kSession: return "ss_session";
     case Kind::kDeformation: return "ss_deformation";
     case Kind::kStressField: return "ss_stress_field";
+    case Kind::kHoldPut: return "ss_hold_put";
+    case Kind::kSubscription: return "ss_subscription";
     case Kind::kNone: break;
   }
   return "handle";

@@ -51,3 +51,30 @@ std::string_view to_string(GeometryStatus status) {
 }
 
 }  // namespace softshell
+
+namespace softshell {
+namespace {
+Error no_holds() {
+  return Error{ErrorCode::kUnavailable, "this session does not support holds and events (PROTOCOL.md version 2)"};
+}
+}  // namespace
+
+Result<HeldResult> Session::put_hold(const GeomId&, const std::string&, const DeformationRequest&,
+                                     std::chrono::milliseconds) {
+  return no_holds();
+}
+
+std::future<Result<HeldResult>> Session::put_hold_async(const GeomId& id, const std::string& hold_id,
+                                                        const DeformationRequest& request,
+                                                        std::chrono::milliseconds ttl) {
+  std::promise<Result<HeldResult>> promise;
+  promise.set_value(put_hold(id, hold_id, request, ttl));
+  return promise.get_future();
+}
+
+Result<HeldResult> Session::release_hold(const GeomId&, const std::string&) { return no_holds(); }
+Result<HoldList> Session::holds(const GeomId&) { return no_holds(); }
+Result<HoldDetail> Session::hold(const GeomId&, const std::string&) { return no_holds(); }
+Result<std::unique_ptr<EventSubscription>> Session::subscribe(const GeomId&, uint32_t) { return no_holds(); }
+
+}  // namespace softshell

@@ -1,28 +1,23 @@
 #include "softshell/remote_session.h"
 
-#include <charconv>
-#include <condition_variable>
-#include <functional>
-#include <mutex>
-
-#include <httplib.h>
+#include "remote_impl.h"
 
 namespace softshell {
-namespace {
 
-std::string number_text(double v) {
-  char buf[32];
-  auto [ptr, ec] = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, ptr);
+Result<std::unique_ptr<httplib::Client>> remote::make_client(const std::string& url, const RemoteSessionOptions& options) {
+  std::string target = url;
+  while (!target.empty() && target.back() == '/') target.pop_back();
+  auto c = std::make_unique<httplib::Client>(target);
+  if (!c->is_valid()) {
+    return Error{ErrorCode::kInvalidArgument, "'" + url + "' is not a server URL (expected http://host:port or host:port)"};
+  }
+  c->set_keep_alive(true);
+  c->set_tcp_nodelay(true);
+  c->set_connection_timeout(options.connect_timeout);
+  c->set_write_timeout(options.request_timeout);
+  c->set_decompress(options.compress);
+  return c;
 }
-
-bool is_binary(const std::string& content_type) {
-  return content_type.rfind(wire::kBinaryMediaType, 0) == 0;
-}
-
-std::string geometry_path(const GeomId& id) { return "/geometries/" + id.hex(); }
-
-}  // namespace
 
 std::string url_encode(std::string_view text) {
   static constexpr char kHex[] = "0123456789ABCDEF";
@@ -40,157 +35,6 @@ std::string url_encode(std::string_view text) {
   }
   return out;
 }
-
-struct RemoteSession::Impl {
-  struct Reply {
-    int status = 0;
-    std::string body;
-    std::string content_type;
-  };
-
-  Impl(std::string_view u, RemoteSessionOptions o) : url(u), options(std::move(o)) {
-    executor = options.executor ? options.executor : std::make_shared<ThreadPool>(std::max(1, options.async_threads));
-  }
-
-  // Waits for the deform_async calls still running (on the host's executor they are not ours to
-  // join).
-  ~Impl() {
-    std::unique_lock lock(task_mu);
-    task_cv.wait(lock, [&] { return in_flight == 0; });
-  }
-
-  // --- connections -------------------------------------------------------------------------
-  Result<std::unique_ptr<httplib::Client>> acquire() {
-    {
-      std::lock_guard lock(pool_mu);
-      if (!idle.empty()) {
-        auto c = std::move(idle.back());
-        idle.pop_back();
-        return c;
-      }
-    }
-    std::string target = url;
-    while (!target.empty() && target.back() == '/') target.pop_back();
-    auto c = std::make_unique<httplib::Client>(target);
-    if (!c->is_valid()) {
-      return Error{ErrorCode::kInvalidArgument,
-                   "'" + url + "' is not a server URL (expected http://host:port or host:port)"};
-    }
-    c->set_keep_alive(true);
-    c->set_tcp_nodelay(true);
-    c->set_connection_timeout(options.connect_timeout);
-    c->set_write_timeout(options.request_timeout);
-    c->set_decompress(options.compress);
-    return c;
-  }
-
-  void release(std::unique_ptr<httplib::Client> c) {
-    std::lock_guard lock(pool_mu);
-    if (static_cast<int>(idle.size()) < options.max_idle_connections) idle.push_back(std::move(c));
-  }
-
-  httplib::Headers headers(std::string_view accept) const {
-    httplib::Headers h{{"Accept", std::string(accept)}};
-    if (!options.compress) h.emplace("Accept-Encoding", "identity");
-    return h;
-  }
-
-  Result<Reply> finish(std::unique_ptr<httplib::Client> c, httplib::Result res) {
-    if (!res) return Error{ErrorCode::kUnavailable, transport_error(res.error())};
-    Reply reply{res->status, std::move(res->body), res->get_header_value("Content-Type")};
-    if (res->get_header_value("Connection") != "close") release(std::move(c));
-    return reply;
-  }
-
-  Result<Reply> get(const std::string& path, std::string_view accept,
-                    std::chrono::milliseconds extra_time = std::chrono::milliseconds(0)) {
-    auto c = acquire();
-    if (!c) return c.error();
-    (*c)->set_read_timeout(options.request_timeout + extra_time);
-    auto res = (*c)->Get(path, headers(accept));
-    return finish(std::move(*c), std::move(res));
-  }
-
-  Result<Reply> post(const std::string& path, const std::string& body, wire::Format body_format,
-                     std::string_view accept) {
-    auto c = acquire();
-    if (!c) return c.error();
-    (*c)->set_read_timeout(options.request_timeout);
-    auto res = (*c)->Post(path, headers(accept), body, std::string(wire::media_type(body_format)));
-    return finish(std::move(*c), std::move(res));
-  }
-
-  // What went wrong on the way, in words a person can act on (httplib's own names, such as
-  // "Connection", say little).
-  std::string transport_error(httplib::Error e) const {
-    using E = httplib::Error;
-    const auto seconds = [](std::chrono::milliseconds ms) { return number_text(static_cast<double>(ms.count()) / 1000.0); };
-    switch (e) {
-      case E::Connection:
-        return "connection refused: is softshell-server running at " + url + "?";
-      case E::ConnectionTimeout:
-        return "no connection to " + url + " within " + seconds(options.connect_timeout) +
-               " s: is the host reachable and softshell-server running there?";
-      case E::Read:
-        return "the softshell server at " + url + " closed the connection or did not answer in time";
-      case E::Write:
-        return "sending the request to the softshell server at " + url + " failed (the connection was closed)";
-      default:
-        return "no answer from the softshell server at " + url + ": " + httplib::to_string(e);
-    }
-  }
-
-  static Error server_error(const Reply& r) { return wire::decode_error_json(r.body, r.status); }
-
-  std::string_view preferred_accept() const { return wire::media_type(options.format); }
-
-  Result<DeformationResult> decode_result(const Reply& r) {
-    if (r.status != 200) return server_error(r);
-    return is_binary(r.content_type) ? wire::decode_result_binary(r.body) : wire::decode_result_json(r.body);
-  }
-
-  Result<DeformationResult> deform(const GeomId& id, const DeformationRequest& request) {
-    const bool binary = options.format == wire::Format::kBinary && request.fits_binary_layout();
-    std::string body;
-    if (binary) {
-      auto encoded = wire::encode_request_binary(request);
-      if (!encoded) return encoded.error();
-      body = std::move(*encoded);
-    } else {
-      auto ok = capture([&] { body = wire::encode_request_json(request); });
-      if (!ok) return ok.error();
-    }
-    auto reply = post(geometry_path(id) + "/results", body, binary ? wire::Format::kBinary : wire::Format::kJson,
-                      preferred_accept());
-    if (!reply) return reply.error();
-    return decode_result(*reply);
-  }
-
-  // --- deform_async calls -------------------------------------------------------------------
-  void submit(std::function<void()> task) {
-    {
-      std::lock_guard lock(task_mu);
-      ++in_flight;
-    }
-    executor->post([this, task = std::move(task)] {
-      task();
-      std::lock_guard lock(task_mu);
-      --in_flight;
-      task_cv.notify_all();
-    });
-  }
-
-  std::string url;
-  RemoteSessionOptions options;
-
-  std::mutex pool_mu;
-  std::vector<std::unique_ptr<httplib::Client>> idle;
-
-  std::shared_ptr<Executor> executor;  // runs deform_async calls
-  std::mutex task_mu;
-  std::condition_variable task_cv;
-  int in_flight = 0;  // deform_async calls posted and not finished (under task_mu)
-};
 
 RemoteSession::RemoteSession(std::string_view url, RemoteSessionOptions options)
     : impl_(std::make_unique<Impl>(url, std::move(options))) {}

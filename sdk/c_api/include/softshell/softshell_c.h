@@ -254,6 +254,8 @@ typedef struct ss_grab ss_grab;                   /* a grab following a hand */
 typedef struct ss_refinement ss_refinement;       /* a mesh refined k levels (level of detail) */
 typedef struct ss_session ss_session;             /* connection to a server */
 typedef struct ss_deformation ss_deformation;     /* an asynchronous deformation */
+typedef struct ss_hold_put ss_hold_put;           /* an asynchronous put of a hold */
+typedef struct ss_subscription ss_subscription;   /* a follower of a geometry's results */
 typedef struct ss_stress_field ss_stress_field;   /* stresses of a stored result */
 
 /* ---------------------------------------------------------------------------------------------
@@ -450,6 +452,54 @@ SS_API void ss_deformation_destroy(ss_deformation* operation);
 SS_API ss_status ss_session_latest_result(ss_session* session, const ss_geom_id* id, uint32_t have, int32_t wait_ms,
                                           int32_t* out_has_new, uint32_t* out_res_id, double* out_xyz,
                                           int32_t capacity, int32_t* out_count);
+
+/* ---------------------------------------------------------------------------------------------
+ * Holds and events (PROTOCOL.md version 2): many clients acting on one object at once, and
+ * results pushed to followers. Nothing here calls back into the host: puts are polled like
+ * asynchronous deformations, subscriptions are polled once a frame. */
+
+/** Starts creating hold `hold_id` (1 to 64 characters of [A-Za-z0-9._-]) on a geometry or
+ *  replacing its contents with `request` (copied), with a lease of `ttl_ms` (1 .. 600000: without
+ *  another put within it the hold lapses); returns at once. Putting the same contents again only
+ *  renews the lease. */
+SS_API ss_status ss_session_put_hold_begin(ss_session* session, const ss_geom_id* id, const char* hold_id,
+                                           const ss_request* request, int32_t ttl_ms, ss_hold_put** out_operation);
+/** `*out_ready` = 1 once answered (accepted or refused), else 0. Never blocks. */
+SS_API ss_status ss_hold_put_poll(ss_hold_put* operation, int32_t* out_ready);
+/** The answer: the first stored result that includes this version of the hold (deformed control
+ *  points as in ss_session_deform) and `*out_version` (nullable), the hold's version it includes.
+ *  SS_NOT_READY while running; the refusal's status and message otherwise: SS_CONFLICT (the hold
+ *  contradicts other holds, which the message names), SS_UNPROCESSABLE (the hold state would be
+ *  undetermined), SS_INVALID_ARGUMENT, SS_NOT_FOUND. May be repeated. */
+SS_API ss_status ss_hold_put_read(ss_hold_put* operation, uint32_t* out_res_id, uint64_t* out_version,
+                                  double* out_xyz, int32_t capacity, int32_t* out_count);
+/** Releases the operation; never blocks (a running put finishes in the background). */
+SS_API void ss_hold_put_destroy(ss_hold_put* operation);
+/** Releases the hold and waits for the first result without it (`*out_res_id`, nullable).
+ *  SS_NOT_FOUND for an unknown hold; SS_CONFLICT when the remaining holds cannot be solved (the
+ *  hold is released all the same). Blocks for one request. */
+SS_API ss_status ss_session_release_hold(ss_session* session, const ss_geom_id* id, const char* hold_id,
+                                         uint32_t* out_res_id);
+
+#define SS_FEED_CONNECTING 0  /* not receiving: a remote stream (re)connecting by itself */
+#define SS_FEED_LIVE 1        /* receiving results as they are stored */
+#define SS_FEED_FAILED 2      /* ended for good (the geometry is unknown); poll returns why */
+
+/** Follows a geometry's results: the newest one with an id above `after` at once, then each newly
+ *  stored one; a remote session reconnects by itself (Last-Event-ID). Blocks until the server
+ *  answered the stream (SS_NOT_FOUND for an unknown geometry). */
+SS_API ss_status ss_session_subscribe(ss_session* session, const ss_geom_id* id, uint32_t after,
+                                      ss_subscription** out_subscription);
+/** The newest result not taken yet (latest wins: a slow reader skips to the newest):
+ *  `*out_has_new` = 1 and the outputs filled, or 0. Never blocks. A result that does not fit
+ *  `capacity` (SS_BUFFER_TOO_SMALL) is kept for the next call. SS_FEED_FAILED's error once
+ *  nothing is left to take. */
+SS_API ss_status ss_subscription_poll(ss_subscription* subscription, int32_t* out_has_new, uint32_t* out_res_id,
+                                      double* out_xyz, int32_t capacity, int32_t* out_count);
+/** `*out_state` = SS_FEED_*. */
+SS_API ss_status ss_subscription_state(ss_subscription* subscription, int32_t* out_state);
+/** Stops following (a remote stream is closed; returns promptly). */
+SS_API void ss_subscription_destroy(ss_subscription* subscription);
 
 #define SS_GEOMETRY_PRECOMPUTING 0  /* the server is assembling and factorizing its stiffness */
 #define SS_GEOMETRY_READY 1         /* deformations are solved at once */

@@ -14,6 +14,8 @@
 
 #include "softshell/control_mesh.h"
 #include "softshell/deformation.h"
+#include "softshell/event_subscription.h"
+#include "softshell/hold.h"
 #include "softshell/limit_evaluator.h"
 #include "softshell/material.h"
 #include "softshell/result.h"
@@ -121,6 +123,41 @@ class Session {
   /// tessellation level or at given points (`GET|POST /geometries/{id}/results/{res_id}/stresses`,
   /// an extension).
   virtual Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) = 0;
+
+  // --- holds and events (PROTOCOL.md version 2) ---------------------------------------------
+  // (Not pure: a session without them, such as a test double, refuses them with kUnavailable.)
+
+  /// Creates the hold `hold_id` on a geometry or replaces its contents, with a lease of `ttl`
+  /// (more than 0, at most 600 s; without another put within it the hold lapses). The same
+  /// contents again only renew the lease (no new version, no solve). Returns the first stored
+  /// result whose hold state includes this version of the hold (or a newer one), with the hold
+  /// versions it includes. Errors carry the server's message: kConflict (409: the hold
+  /// contradicts other live holds, which the message names; or a release merged into the same
+  /// solve left the hold state unsolvable), kUnprocessable (422: the hold state would be
+  /// undetermined, or the hold is invalid in itself), kInvalidArgument (hold id, body, ttl),
+  /// kNotFound. A refused change leaves the hold as it was.
+  virtual Result<HeldResult> put_hold(const GeomId& id, const std::string& hold_id, const DeformationRequest& request,
+                                      std::chrono::milliseconds ttl = std::chrono::seconds(10));
+  /// The same without blocking: the future becomes ready with the answer (poll it with
+  /// `wait_for(std::chrono::seconds(0))` from a frame loop). (The default implementation calls
+  /// `put_hold` on the calling thread; the embedded and remote sessions do not block.)
+  virtual std::future<Result<HeldResult>> put_hold_async(const GeomId& id, const std::string& hold_id,
+                                                         const DeformationRequest& request,
+                                                         std::chrono::milliseconds ttl = std::chrono::seconds(10));
+  /// Releases the hold at once and returns the first result without it (with no hold left, the
+  /// rest shape). kNotFound for an unknown hold; kConflict naming the cause when the remaining
+  /// holds cannot be solved (the hold is released all the same; `holds()` shows kUnsolvable).
+  virtual Result<HeldResult> release_hold(const GeomId& id, const std::string& hold_id);
+  /// The live holds of a geometry and the state of their solve.
+  virtual Result<HoldList> holds(const GeomId& id);
+  /// One live hold with its contents; kNotFound if there is none by that id.
+  virtual Result<HoldDetail> hold(const GeomId& id, const std::string& hold_id);
+
+  /// Follows a geometry's results: the newest one with an id above `after` at once (if there is
+  /// one), then each newly stored one (see `EventSubscription`: polled, latest wins). A remote
+  /// session reconnects by itself after a dropped connection and resumes after the newest id it
+  /// received. kNotFound for an unknown geometry.
+  virtual Result<std::unique_ptr<EventSubscription>> subscribe(const GeomId& id, uint32_t after = 0);
 };
 
 }  // namespace softshell

@@ -37,6 +37,13 @@ struct RemoteSessionOptions {
   int max_idle_connections = 8;
   /// Ask the server to gzip JSON responses (useful on slow links, wasteful on loopback/LAN).
   bool compress = false;
+  /// Event streams (`subscribe`): the first wait before reconnecting a dropped stream, doubled
+  /// after each failed attempt up to `events_retry_max`; reset once a stream is up again.
+  std::chrono::milliseconds events_retry_min{100};
+  std::chrono::milliseconds events_retry_max{5000};
+  /// A stream that carries nothing (not even the server's keep-alive comment, sent at least
+  /// every 15 s) for this long is taken as dropped and reconnected.
+  std::chrono::milliseconds events_idle_timeout{45000};
 };
 
 /// A connection to a softshell server over HTTP/1.1 (cpp-httplib's client), with keep-alive
@@ -80,6 +87,23 @@ class RemoteSession final : public Session {
                                                          std::chrono::milliseconds wait) override;
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) override;
   Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) override;
+
+  // Holds (`PUT/DELETE/GET .../holds`): bodies in the preferred format, answers always in JSON
+  // (only JSON carries the hold versions; positions then have full precision). A PUT waits up to
+  // 60 s (the protocol's most) for its result. `put_hold_async` runs on the executor.
+  Result<HeldResult> put_hold(const GeomId& id, const std::string& hold_id, const DeformationRequest& request,
+                              std::chrono::milliseconds ttl = std::chrono::seconds(10)) override;
+  std::future<Result<HeldResult>> put_hold_async(const GeomId& id, const std::string& hold_id,
+                                                 const DeformationRequest& request,
+                                                 std::chrono::milliseconds ttl = std::chrono::seconds(10)) override;
+  Result<HeldResult> release_hold(const GeomId& id, const std::string& hold_id) override;
+  Result<HoldList> holds(const GeomId& id) override;
+  Result<HoldDetail> hold(const GeomId& id, const std::string& hold_id) override;
+  /// `GET .../events` on a thread of the subscription's own: returns once the server answered
+  /// the stream (an error status is returned as the error), then reconnects by itself after a
+  /// dropped connection with `Last-Event-ID` (backoff from `events_retry_min` doubling up to
+  /// `events_retry_max`). A subscription may outlive the session.
+  Result<std::unique_ptr<EventSubscription>> subscribe(const GeomId& id, uint32_t after = 0) override;
 
  private:
   struct Impl;

@@ -6,8 +6,10 @@
 
 #include <chrono>
 #include <memory>
+#include <mutex>
 #include <string>
 
+#include "softshell/executor.h"
 #include "softshell/http/server.h"
 #include "softshell/service/service.h"
 #include "softshell/session.h"
@@ -60,8 +62,26 @@ class EmbeddedSession final : public Session {
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) override;
   Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) override;
 
+  // Holds and events: the service's own (`put_hold_async` waits for an unanswered change on a
+  // small pool of the session's, one thread, started on first use; `subscribe` is a service
+  // listener, nothing polls).
+  Result<HeldResult> put_hold(const GeomId& id, const std::string& hold_id, const DeformationRequest& request,
+                              std::chrono::milliseconds ttl = std::chrono::seconds(10)) override;
+  std::future<Result<HeldResult>> put_hold_async(const GeomId& id, const std::string& hold_id,
+                                                 const DeformationRequest& request,
+                                                 std::chrono::milliseconds ttl = std::chrono::seconds(10)) override;
+  Result<HeldResult> release_hold(const GeomId& id, const std::string& hold_id) override;
+  Result<HoldList> holds(const GeomId& id) override;
+  Result<HoldDetail> hold(const GeomId& id, const std::string& hold_id) override;
+  Result<std::unique_ptr<EventSubscription>> subscribe(const GeomId& id, uint32_t after = 0) override;
+
  private:
+  Executor& waiters();
+
   std::shared_ptr<service::Service> service_;
+  std::mutex waiters_mu_;
+  std::unique_ptr<ThreadPool> waiters_;  // waits for put_hold_async outcomes (declared after service_:
+                                         // joined first)
   mutable std::mutex listener_mu_;
   std::unique_ptr<http::HttpServer> listener_;
 };
