@@ -159,7 +159,8 @@ TEST(ServerAppTest, OptionFormsVersionAndEnvironment) {
   EXPECT_EQ(help.wait(std::chrono::seconds(10)), 0);
   for (const char* env : {"SOFTSHELL_HOST", "SOFTSHELL_PORT", "SOFTSHELL_THREADS", "SOFTSHELL_SOLVE_THREADS",
                           "SOFTSHELL_PRECOMPUTE_JOBS", "SOFTSHELL_CACHE_MB", "SOFTSHELL_STORE_MB", "SOFTSHELL_MAX_BODY_MB",
-                          "SOFTSHELL_MAX_CONNECTIONS", "SOFTSHELL_EVENT_WRITERS", "SOFTSHELL_LOG_LEVEL"}) {
+                          "SOFTSHELL_MAX_CONNECTIONS", "SOFTSHELL_EVENT_WRITERS", "SOFTSHELL_MAX_HOLDS",
+                          "SOFTSHELL_LOG_LEVEL"}) {
     EXPECT_NE(text.find(env), std::string::npos) << env;
   }
 
@@ -187,6 +188,45 @@ TEST(ServerAppTest, OptionFormsVersionAndEnvironment) {
   EXPECT_NE(bad.drain_stderr().find("--port"), std::string::npos);
   Child level({SOFTSHELL_SERVER_EXE, "--log-level=loud"});
   EXPECT_EQ(level.wait(std::chrono::seconds(10)), 2);
+}
+
+// --max-holds: the live holds one geometry takes.
+TEST(ServerAppTest, MaxHoldsLimitsTheLiveHoldsOfAGeometry) {
+  Child server({SOFTSHELL_SERVER_EXE, "--port=0", "--threads=1", "--max-holds=2", "--log-level=warning"});
+  const std::string out = server.read_until("\n", std::chrono::seconds(30));
+  const int port = port_of(out.substr(0, out.find('\n')));
+  ASSERT_GT(port, 0) << out;
+  {
+    httplib::Client c("127.0.0.1", port);
+    c.set_read_timeout(std::chrono::seconds(60));
+    auto up = c.Post("/geometries", wire::encode_geometry_binary(exact_grid(), exact_material()).value(), kBin);
+    ASSERT_TRUE(up);
+    ASSERT_EQ(up->status, 201);
+    const std::string base = "/geometries/" + wire::decode_upload_response_binary(up->body, true).value().id.hex();
+    DeformationRequest pins;
+    pins.vertex_constraints = pinned_corners(4);
+    DeformationRequest push;
+    push.forces.push_back({grid_index(4, 2, 2), Vec3(0.0, 0.0, -0.1)});
+    const std::string pins_body = wire::encode_request_json(pins), push_body = wire::encode_request_json(push);
+    auto a = c.Put(base + "/holds/pins", pins_body, kJson);  // waits for the precomputation
+    ASSERT_TRUE(a);
+    EXPECT_EQ(a->status, 200) << a->body;
+    auto b = c.Put(base + "/holds/hand-1", push_body, kJson);
+    ASSERT_TRUE(b);
+    EXPECT_EQ(b->status, 200) << b->body;
+    auto third = c.Put(base + "/holds/hand-2", push_body, kJson);
+    ASSERT_TRUE(third);
+    EXPECT_EQ(third->status, 409) << third->body;
+    EXPECT_NE(third->body.find("2 live holds"), std::string::npos) << third->body;
+    auto again = c.Put(base + "/holds/hand-1", push_body, kJson);  // a hold that exists is always taken
+    ASSERT_TRUE(again);
+    EXPECT_EQ(again->status, 200) << again->body;
+  }
+  kill(server.pid(), SIGTERM);
+  EXPECT_EQ(server.wait(std::chrono::seconds(15)), 0);
+  Child bad({SOFTSHELL_SERVER_EXE, "--max-holds=0"});
+  EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
+  EXPECT_NE(bad.drain_stderr().find("--max-holds"), std::string::npos);
 }
 
 TEST(ServerAppTest, BusyPortIsAnError) {

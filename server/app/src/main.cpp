@@ -44,6 +44,7 @@ struct Options {
   size_t cache_mb = 0, store_mb = 0, max_body_mb = 0;
   int max_connections = 0;
   int event_writers = 0;
+  size_t max_holds = 0;
   std::vector<std::string> cors_origins;
   std::string log_level = "info";
 };
@@ -83,6 +84,11 @@ void add_options(CLI::App& app, Options& o) {
   app.add_option("--event-writers", o.event_writers,
                  "threads writing event streams, 1..64 (default: half the cores,\nat least 1)")
       ->envname("SOFTSHELL_EVENT_WRITERS")->type_name("N")->check(range(1, 64));
+  app.add_option("--max-holds", o.max_holds,
+                 "live holds one geometry takes at once, 1..65536 (default 256);\n"
+                 "every hold-state solve combines all of them; a PUT that would\n"
+                 "create one more gets 409")
+      ->envname("SOFTSHELL_MAX_HOLDS")->type_name("N")->check(range(1, 65536));
   app.add_option("--cors-origin", o.cors_origins,
                  "let pages from origin O (e.g. http://localhost:3000, or *) call\n"
                  "the API (CORS); repeatable; off by default")
@@ -131,6 +137,7 @@ int main(int argc, char** argv) {
   if (o.max_body_mb > 0) http_options.max_body_bytes = o.max_body_mb << 20;
   if (o.max_connections > 0) http_options.max_connections = o.max_connections;
   if (o.event_writers > 0) http_options.event_writers = o.event_writers;
+  if (o.max_holds > 0) service_options.max_holds_per_geometry = o.max_holds;
   http_options.cors_origins = o.cors_origins;
   const service::LogLevel level = service::parse_log_level(o.log_level).value();  // checked above
 
