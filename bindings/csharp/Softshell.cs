@@ -219,6 +219,7 @@ namespace Softshell
         public const int Mask_X = 1, Mask_Y = 2, Mask_Z = 4, Mask_All = 7;
         public const int ForceTransferSubdivide = 0, ForceTransferVirtualWork = 1;
         public const int BoundaryEdgeAndCorner = 0, BoundaryNone = 1;
+        public const int FeedConnecting = 0, FeedLive = 1, FeedFailed = 2;
 
         // ---- helpers -----------------------------------------------------------------------
 
@@ -439,5 +440,31 @@ namespace Softshell
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_stress_field_max(IntPtr field, out StressSample max, out int exceedsYield);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] public static extern void ss_stress_field_destroy(IntPtr field);
+
+        // ---- holds and events (PROTOCOL.md version 2) --------------------------------------
+
+        /// <summary>holdId: 1 to 64 characters of [A-Za-z0-9._-] (Utf8("...")); ttlMs 1..600000. Returns at
+        /// once: poll ss_hold_put_poll once a frame, then ss_hold_put_read.</summary>
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_session_put_hold_begin(IntPtr session, ref GeomId id, byte[] holdId, IntPtr request, int ttlMs,
+                                                              out IntPtr operation);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] public static extern Status ss_hold_put_poll(IntPtr operation, out int ready);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_hold_put_read(IntPtr operation, out uint resId, out ulong version, double[] outXyz, int capacity,
+                                                     out int count);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] public static extern void ss_hold_put_destroy(IntPtr operation);
+        /// <summary>Blocks for one request: call it off the frame loop, or when the grab ends.</summary>
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_session_release_hold(IntPtr session, ref GeomId id, byte[] holdId, out uint resId);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_session_subscribe(IntPtr session, ref GeomId id, uint after, out IntPtr subscription);
+        /// <summary>Never blocks; latest wins (a slow reader skips to the newest result).</summary>
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_subscription_poll(IntPtr subscription, out int hasNew, out uint resId, double[] outXyz, int capacity,
+                                                         out int count);
+        /// <summary>state: FeedConnecting, FeedLive or FeedFailed.</summary>
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_subscription_state(IntPtr subscription, out int state);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] public static extern void ss_subscription_destroy(IntPtr subscription);
     }
 }

@@ -230,6 +230,44 @@ static class SoftshellSmoke
         var latest = new double[3 * NV];
         Native.Check(Native.ss_session_latest_result(remote, ref id, 0, 0, out hasNew, out resId, latest, NV, out count));
         Check(hasNew == 1 && resId == 2 && Math.Abs(latest[3 * N + 2] - u2[3 * N + 2]) < 1e-12, "the remote client sees the result");
+
+        // Holds and events: the remote client follows while the embedded one holds the plate as a
+        // cantilever (the same request as a hold: the same shape), then lets go (the rest shape).
+        IntPtr feed;
+        Native.Check(Native.ss_session_subscribe(remote, ref id, 2, out feed));
+        IntPtr put;
+        Native.Check(Native.ss_session_put_hold_begin(session, ref id, Native.Utf8("csharp.clamp"), one, 10000, out put));
+        int putReady = 0, putFrames = 0;
+        while (putReady == 0 && putFrames < 100000)
+        {
+            Native.Check(Native.ss_hold_put_poll(put, out putReady));
+            if (putReady == 0) { ++putFrames; Thread.Sleep(1); }
+        }
+        uint heldId;
+        ulong holdVersion;
+        var held = new double[3 * NV];
+        Native.Check(Native.ss_hold_put_read(put, out heldId, out holdVersion, held, NV, out count));
+        Native.ss_hold_put_destroy(put);
+        double worstHeld = 0;
+        for (int k = 0; k < 3 * NV; ++k) worstHeld = Math.Max(worstHeld, Math.Abs(held[k] - u1[k]));
+        Check(heldId == 3 && holdVersion == 1 && worstHeld <= 1e-9 * Math.Abs(tip), "the hold's result is the cantilever");
+        int followed = 0;
+        uint seen = 0;
+        for (int frame = 0; frame < 10000 && seen < 3; ++frame)
+        {
+            Native.Check(Native.ss_subscription_poll(feed, out followed, out seen, latest, NV, out count));
+            if (seen < 3) Thread.Sleep(1);
+        }
+        int feedState;
+        Native.Check(Native.ss_subscription_state(feed, out feedState));
+        Check(seen == 3 && feedState == Native.FeedLive && Math.Abs(latest[3 * N + 2] - held[3 * N + 2]) < 1e-12,
+              "the follower got the hold's result through the event stream");
+        uint releasedId;
+        Native.Check(Native.ss_session_release_hold(session, ref id, Native.Utf8("csharp.clamp"), out releasedId));
+        Check(releasedId == 4, "releasing stores the rest shape");
+        Check(Native.ss_session_release_hold(session, ref id, Native.Utf8("csharp.clamp"), out releasedId) == Status.NotFound,
+              "a released hold is gone");
+        Native.ss_subscription_destroy(feed);
         Native.ss_session_destroy(remote);
 
         // Handles are generation-checked: a destroyed one is an error, not a crash.
