@@ -240,8 +240,10 @@ TEST(HttpEventsTest, ShutdownWithHoldsAndStreamsOpenEndsEveryStreamCleanly) {
     Reply r = get(*c, g.base + "/latest_result?have=99&wait=30");
     EXPECT_EQ(r.status, 503);
   });
+  // Stop once the long poll waits (on a loaded machine its connection can take a while).
+  for (int i = 0; i < 1000 && server->service().stats().waiters == 0; ++i) std::this_thread::sleep_for(milliseconds(10));
+  EXPECT_EQ(server->service().stats().waiters, 1u);
   const auto start = std::chrono::steady_clock::now();
-  std::this_thread::sleep_for(milliseconds(100));
   server->http().stop();
   poller.join();
   for (auto& s : streams) {

@@ -73,6 +73,37 @@ std::shared_ptr<Session> session_of(const ss_session* handle) { return live(hand
 
 void log_message(int32_t level, std::string_view message) noexcept { c_api::log(level, message); }
 
+namespace {
+
+// Each task is boxed for the host and unboxed (and freed) by the trampoline it runs.
+class TaskSystemExecutor final : public Executor {
+ public:
+  explicit TaskSystemExecutor(const ss_task_system& tasks) : tasks_(tasks) {}
+  void post(std::function<void()> task) override {
+    auto boxed = std::make_unique<std::function<void()>>(std::move(task));
+    tasks_.enqueue(&run, boxed.release(), tasks_.user_context);
+  }
+  int concurrency() const override { return tasks_.concurrency; }
+
+ private:
+  static void run(void* data) {
+    const std::unique_ptr<std::function<void()>> task(static_cast<std::function<void()>*>(data));
+    (*task)();  // softshell's tasks catch what they raise
+  }
+  ss_task_system tasks_;
+};
+
+}  // namespace
+
+std::shared_ptr<Executor> executor_of(const ss_task_system& tasks) {
+  if (tasks.enqueue == nullptr) fail(ErrorCode::kInvalidArgument, "task system: enqueue is NULL");
+  if (tasks.concurrency < 1) {
+    fail(ErrorCode::kInvalidArgument,
+         "task system: concurrency must be at least 1, got " + std::to_string(tasks.concurrency));
+  }
+  return std::make_shared<TaskSystemExecutor>(tasks);
+}
+
 }  // namespace softshell::c_api
 
 extern "C" {
@@ -82,6 +113,11 @@ void ss_remote_options_default(ss_remote_options* out) {
 }
 
 ss_status ss_session_create_remote(const char* url, const ss_remote_options* options, ss_session** out_session) {
+  return ss_session_create_remote_on(url, options, nullptr, out_session);
+}
+
+ss_status ss_session_create_remote_on(const char* url, const ss_remote_options* options, const ss_task_system* tasks,
+                                      ss_session** out_session) {
   return guard("ss_session_create_remote", [&] {
     required(out_session, "out_session");
     *out_session = nullptr;
@@ -97,6 +133,7 @@ ss_status ss_session_create_remote(const char* url, const ss_remote_options* opt
     if (o.connect_timeout_ms > 0) ro.connect_timeout = std::chrono::milliseconds(o.connect_timeout_ms);
     if (o.request_timeout_ms > 0) ro.request_timeout = std::chrono::milliseconds(o.request_timeout_ms);
     if (o.async_threads > 0) ro.async_threads = o.async_threads;
+    if (tasks) ro.executor = executor_of(*tasks);
     std::shared_ptr<Session> session = RemoteSession::connect(url, ro).value();
     *out_session = wrap_session(std::move(session));
   });

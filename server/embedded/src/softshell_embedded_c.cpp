@@ -42,6 +42,11 @@ void ss_embedded_options_default(ss_embedded_options* out) {
 }
 
 ss_status ss_session_create_embedded(const ss_embedded_options* options, ss_session** out_session) {
+  return ss_session_create_embedded_on(options, nullptr, out_session);
+}
+
+ss_status ss_session_create_embedded_on(const ss_embedded_options* options, const ss_task_system* tasks,
+                                        ss_session** out_session) {
   return softshell::c_api::guard("ss_session_create_embedded", [&] {
     using softshell::ErrorCode;
     if (out_session == nullptr) softshell::fail(ErrorCode::kInvalidArgument, "out_session is NULL");
@@ -71,6 +76,7 @@ ss_status ss_session_create_embedded(const ss_embedded_options* options, ss_sess
     service.precompute_threads = o.worker_threads;
     if (o.cache_mb > 0) service.cache_bytes = static_cast<size_t>(o.cache_mb) << 20;
     service.logger = c_logger();
+    if (tasks) service.executor = softshell::c_api::executor_of(*tasks);
     auto session = std::make_shared<softshell::EmbeddedSession>(service);
     if (o.listen != 0) {
       softshell::http::ServerOptions http;

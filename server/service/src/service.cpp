@@ -134,8 +134,14 @@ Service::Impl::Impl(const ServiceOptions& o)
     : options(o),
       cache(std::make_shared<engine::FactorCache>(o.cache_bytes)),
       budget(o.store_bytes ? o.store_bytes : physical_memory() / 2),
-      precompute_pool(std::max(1, o.precompute_jobs)),
-      solve_pool(o.solve_threads > 0 ? o.solve_threads : hardware_threads()) {}
+      executor(o.executor ? o.executor
+                          : std::make_shared<ThreadPool>(std::max(1, o.precompute_jobs) +
+                                                         (o.solve_threads > 0 ? o.solve_threads : hardware_threads()))),
+      precompute_pool(executor, std::max(1, o.precompute_jobs)),
+      solve_pool(executor, o.solve_threads > 0 ? o.solve_threads : hardware_threads()) {
+  // A host that gives its executor runs the precomputations' parallel work on it too.
+  if (o.executor && !options.precompute.executor) options.precompute.executor = o.executor;
+}
 
 std::shared_ptr<Entry> Service::Impl::find(const GeomId& id) const {
   std::shared_lock lock(registry_mu);

@@ -22,7 +22,7 @@
 #include "lease_timer.h"
 #include "memory_budget.h"
 #include "softshell/service/service.h"
-#include "task_pool.h"
+#include "task_queue.h"
 
 namespace softshell::service {
 namespace internal {
@@ -201,9 +201,12 @@ struct Service::Impl {
   Histogram hold_solve_hist;
 
   // Declared last: destroyed (joined) first, while everything their tasks use still exists.
+  // Where the tasks run: the host's executor, or a pool of the service's own (destroyed after the
+  // queues, which wait for their tasks).
+  std::shared_ptr<Executor> executor;
   internal::LeaseTimer leases;
-  internal::TaskPool precompute_pool;
-  internal::TaskPool solve_pool;
+  internal::TaskQueue precompute_pool;
+  internal::TaskQueue solve_pool;
 };
 
 }  // namespace softshell::service

@@ -408,6 +408,22 @@ SS_API ss_status ss_refinement_request_to_fine(const ss_refinement* refinement, 
  * Sessions: `ss_session_create_remote` (below) talks to a server over HTTP;
  * `ss_session_create_embedded` (softshell_embedded_c.h, in the server library) runs one in-process */
 
+/** The host's threads (Box2D's enqueueTask, Jolt's JobSystem): where a session runs its
+ *  background work (a remote session's asynchronous requests; an embedded server's
+ *  precomputations and solves). `enqueue` runs `task(task_data)` soon, exactly once, on one of the
+ *  host's threads; it is called from any thread, must not block waiting for the task and must not
+ *  drop it. An embedded server's tasks never wait for other tasks, so a pool of any size makes
+ *  progress; a remote session's tasks wait on the network (one request each), so do not share a
+ *  small pool between a remote session and the in-process server it talks to. Blittable (24
+ *  bytes on 64-bit platforms). */
+typedef void (*ss_task_fn)(void* task_data);
+typedef void (*ss_enqueue_task_fn)(ss_task_fn task, void* task_data, void* user_context);
+typedef struct ss_task_system {
+  ss_enqueue_task_fn enqueue;
+  int32_t concurrency;  /* tasks the host runs at once, >= 1 */
+  void* user_context;   /* passed to every enqueue */
+} ss_task_system;
+
 /** Options of a remote session. */
 typedef struct ss_remote_options {
   int32_t connect_timeout_ms;  /* time to open a connection; 0: 5000 */
@@ -422,6 +438,10 @@ SS_API void ss_remote_options_default(ss_remote_options* out);
  *  `GET /health`; SS_UNAVAILABLE if it did not. `options` NULL: defaults. */
 SS_API ss_status ss_session_create_remote(const char* url, const ss_remote_options* options,
                                           ss_session** out_session);
+/** The same, with its asynchronous requests run as the host's tasks (`tasks` NULL: the session's
+ *  own `async_threads`). The host must keep running tasks until the session is destroyed. */
+SS_API ss_status ss_session_create_remote_on(const char* url, const ss_remote_options* options,
+                                             const ss_task_system* tasks, ss_session** out_session);
 
 SS_API void ss_session_destroy(ss_session* session);
 /** 32 lowercase hex characters plus NUL into `out` (capacity >= 33 chars). */

@@ -9,6 +9,7 @@
 #include <memory>
 #include <string_view>
 
+#include "softshell/executor.h"
 #include "softshell/session.h"
 #include "softshell/softshell_c.h"
 
@@ -21,6 +22,10 @@ SS_API ss_session* wrap_session(std::shared_ptr<Session> session);
 /// The C++ session behind a live `ss_session` handle. Throws `Exception(kInvalidArgument)` for
 /// NULL or a handle that is not a live session.
 SS_API std::shared_ptr<Session> session_of(const ss_session* handle);
+
+/// The host's task system as an `Executor` (each task boxed and handed to `enqueue`). Throws
+/// `Exception(kInvalidArgument)` for NULL `enqueue` or `concurrency` < 1.
+SS_API std::shared_ptr<Executor> executor_of(const ss_task_system& tasks);
 
 /// Logs a message (level: SS_LOG_*) to the SDK's process-wide sink (softshell/log.h), which is the
 /// C log callback when `ss_set_log_callback` installed one. Thread-safe; never throws.

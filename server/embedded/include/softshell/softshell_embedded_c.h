@@ -48,6 +48,13 @@ SS_EMBEDDED_API void ss_embedded_options_default(ss_embedded_options* out);
  *  with `ss_session_destroy`; the server stops when the session and its operations are gone. */
 SS_EMBEDDED_API ss_status ss_session_create_embedded(const ss_embedded_options* options, ss_session** out_session);
 
+/** The same, with the server's precomputations and solves run as the host's tasks (`tasks` NULL:
+ *  the server's own threads): at most `worker_threads` solves and one precomputation at once,
+ *  and the precomputation's parallel work, on `tasks->concurrency` threads. The host must keep
+ *  running tasks until the session is destroyed (destroying it waits for the server's tasks). */
+SS_EMBEDDED_API ss_status ss_session_create_embedded_on(const ss_embedded_options* options, const ss_task_system* tasks,
+                                                        ss_session** out_session);
+
 /** The port of the session's HTTP listener, 0 if it has none. SS_INVALID_ARGUMENT for a session
  *  that is not an embedded one. */
 SS_EMBEDDED_API ss_status ss_session_embedded_port(const ss_session* session, int32_t* out_port);

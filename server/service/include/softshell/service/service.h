@@ -39,6 +39,7 @@
 #include "softshell/result.h"
 #include "softshell/service/log.h"
 #include "softshell/service/metrics.h"
+#include "softshell/executor.h"
 #include "softshell/session.h"
 #include "softshell/stresses.h"
 
@@ -70,6 +71,11 @@ struct ServiceOptions {
   /// count bounds its cost). A PUT that would create one more is refused with kConflict (HTTP
   /// 409) naming the limit; changes of existing holds are always taken.
   size_t max_holds_per_geometry = 256;
+  /// Where the service's precomputations and solves run: the host's threads (at most
+  /// `precompute_jobs` and `solve_threads` of them at once; a host executor also runs the
+  /// precomputations' parallel work unless `precompute.executor` says otherwise). Empty: a pool
+  /// of the service's own with `precompute_jobs + solve_threads` threads.
+  std::shared_ptr<Executor> executor;
   /// Where the service's messages go (precomputations started/finished/failed).
   Logger logger;
 };
