@@ -44,9 +44,6 @@ struct Symbolic {
   Eigen::Index a_nonzeros = 0;    // of the upper triangle given to factorize()
   std::vector<int32_t> position;  // position[i]: where row i of A is in the factor (P)
   std::vector<int32_t> original;  // original[k]: the row of A at factor position k (P^T)
-  // P A P^T's lower triangle by columns: row `a_row[q]`, value A.valuePtr()[a_value[q]].
-  std::vector<int64_t> a_start;
-  std::vector<int32_t> a_row, a_value;
   // Supernode s: columns first[s] .. first[s + 1] - 1; its rows (its own columns first, then the
   // rows below, ascending) are rows[row_start[s] .. row_start[s + 1]); its values a column-major
   // block at value_start[s].
@@ -56,9 +53,8 @@ struct Symbolic {
 
   size_t supernodes() const { return first.size() - 1; }
   size_t bytes() const {
-    return (position.size() + original.size() + a_row.size() + a_value.size() + first.size() + supernode_of.size() +
-            rows.size()) * sizeof(int32_t) +
-           (a_start.size() + row_start.size() + value_start.size()) * sizeof(int64_t) + sizeof(Symbolic);
+    return (position.size() + original.size() + first.size() + supernode_of.size() + rows.size()) * sizeof(int32_t) +
+           (row_start.size() + value_start.size()) * sizeof(int64_t) + sizeof(Symbolic);
   }
 };
 
@@ -131,6 +127,40 @@ std::vector<int32_t> elimination_tree(const std::vector<int64_t>& start, const s
     }
   }
   return parent;
+}
+
+// P A P^T's lower triangle by columns, for the ordering `position`: row `row[q]`, value
+// A.valuePtr()[value[q]] (A given by its upper triangle).
+struct LowerEntries {
+  std::vector<int64_t> start;
+  std::vector<int32_t> row, value;
+};
+
+LowerEntries lower_entries(const Eigen::SparseMatrix<double>& upper, const std::vector<int32_t>& position) {
+  const auto n = static_cast<size_t>(upper.rows());
+  LowerEntries a;
+  a.start.assign(n + 1, 0);
+  for (Eigen::Index j = 0; j < upper.cols(); ++j) {
+    for (int p = upper.outerIndexPtr()[j]; p < upper.outerIndexPtr()[j + 1]; ++p) {
+      if (upper.innerIndexPtr()[p] > j) continue;
+      const int32_t pi = position[static_cast<size_t>(upper.innerIndexPtr()[p])], pj = position[static_cast<size_t>(j)];
+      ++a.start[static_cast<size_t>(std::min(pi, pj)) + 1];
+    }
+  }
+  for (size_t k = 0; k < n; ++k) a.start[k + 1] += a.start[k];
+  a.row.resize(static_cast<size_t>(a.start[n]));
+  a.value.resize(static_cast<size_t>(a.start[n]));
+  std::vector<int64_t> next(a.start.begin(), a.start.end() - 1);
+  for (Eigen::Index j = 0; j < upper.cols(); ++j) {
+    for (int p = upper.outerIndexPtr()[j]; p < upper.outerIndexPtr()[j + 1]; ++p) {
+      if (upper.innerIndexPtr()[p] > j) continue;
+      const int32_t pi = position[static_cast<size_t>(upper.innerIndexPtr()[p])], pj = position[static_cast<size_t>(j)];
+      const auto q = static_cast<size_t>(next[static_cast<size_t>(std::min(pi, pj))]++);
+      a.row[q] = std::max(pi, pj);
+      a.value[q] = p;
+    }
+  }
+  return a;
 }
 
 std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper) {
@@ -225,30 +255,7 @@ std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper
     for (int32_t j = s->first[t]; j < s->first[t + 1]; ++j) s->supernode_of[static_cast<size_t>(j)] = static_cast<int32_t>(t);
   }
 
-  // P A P^T's lower triangle by columns (from the upper one's entries).
-  s->a_start.assign(un + 1, 0);
-  for (Eigen::Index j = 0; j < n; ++j) {
-    for (int p = upper.outerIndexPtr()[j]; p < upper.outerIndexPtr()[j + 1]; ++p) {
-      if (upper.innerIndexPtr()[p] > j) continue;
-      const int32_t pi = s->position[static_cast<size_t>(upper.innerIndexPtr()[p])], pj = s->position[static_cast<size_t>(j)];
-      ++s->a_start[static_cast<size_t>(std::min(pi, pj)) + 1];
-    }
-  }
-  for (size_t k = 0; k < un; ++k) s->a_start[k + 1] += s->a_start[k];
-  s->a_row.resize(static_cast<size_t>(s->a_start[un]));
-  s->a_value.resize(static_cast<size_t>(s->a_start[un]));
-  {
-    std::vector<int64_t> next(s->a_start.begin(), s->a_start.end() - 1);
-    for (Eigen::Index j = 0; j < n; ++j) {
-      for (int p = upper.outerIndexPtr()[j]; p < upper.outerIndexPtr()[j + 1]; ++p) {
-        if (upper.innerIndexPtr()[p] > j) continue;
-        const int32_t pi = s->position[static_cast<size_t>(upper.innerIndexPtr()[p])], pj = s->position[static_cast<size_t>(j)];
-        const auto q = static_cast<size_t>(next[static_cast<size_t>(std::min(pi, pj))]++);
-        s->a_row[q] = std::max(pi, pj);
-        s->a_value[q] = p;
-      }
-    }
-  }
+  const LowerEntries a = lower_entries(upper, s->position);
 
   // Each supernode's rows: its columns, then A's rows below them and its children's rows below
   // them (a child: a supernode whose first row below its own columns falls in this one).
@@ -266,7 +273,7 @@ std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper
       }
     };
     for (int32_t j = k1; j < k2; ++j) {
-      for (int64_t q = s->a_start[static_cast<size_t>(j)]; q < s->a_start[static_cast<size_t>(j) + 1]; ++q) add(s->a_row[static_cast<size_t>(q)]);
+      for (int64_t q = a.start[static_cast<size_t>(j)]; q < a.start[static_cast<size_t>(j) + 1]; ++q) add(a.row[static_cast<size_t>(q)]);
     }
     for (int32_t c = child_head[t]; c >= 0; c = child_next[static_cast<size_t>(c)]) {
       const auto cs = static_cast<size_t>(c);
@@ -328,6 +335,7 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
     state->values.assign(static_cast<size_t>(s.value_start.back()), 0.0);
     double* values = state->values.data();
     const double* ax = upper.valuePtr();
+    const LowerEntries a = lower_entries(upper, s.position);
 
     // Left-looking: supernode t gathers the updates of every descendant d with rows in t's
     // columns (d waits in t's list, `head`, until then; `next_row` is where d's rows in t begin),
@@ -343,8 +351,8 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
       for (Eigen::Index i = 0; i < nrows; ++i) map[static_cast<size_t>(rows[i])] = static_cast<int32_t>(i);
       Block lt(values + s.value_start[t], nrows, ncols, Eigen::OuterStride<>(nrows));
       for (int32_t j = k1; j < k2; ++j) {
-        for (int64_t q = s.a_start[static_cast<size_t>(j)]; q < s.a_start[static_cast<size_t>(j) + 1]; ++q) {
-          lt(map[static_cast<size_t>(s.a_row[static_cast<size_t>(q)])], j - k1) += ax[s.a_value[static_cast<size_t>(q)]];
+        for (int64_t q = a.start[static_cast<size_t>(j)]; q < a.start[static_cast<size_t>(j) + 1]; ++q) {
+          lt(map[static_cast<size_t>(a.row[static_cast<size_t>(q)])], j - k1) += ax[a.value[static_cast<size_t>(q)]];
         }
       }
       for (int32_t d = head[t]; d >= 0;) {
@@ -404,22 +412,15 @@ size_t CholeskyFactor::bytes() const {
 
 double CholeskyFactor::min_pivot() const { return state_->min_pivot; }
 
-Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* fraction_read) const {
-  const Symbolic& s = *state_->symbolic;
-  const size_t ns = s.supernodes();
-  const double* values = state_->values.data();
-  Eigen::MatrixXd x(s.n, rhs.cols());
-  // P B, and the supernodes the sweep reaches: those holding a nonzero row of it and every
-  // supernode one of them updates (its rows below its columns), in ascending order.
-  std::vector<char> reached(ns, 0);
-  for (Eigen::Index i = 0; i < s.n; ++i) {
-    const int32_t k = s.position[static_cast<size_t>(i)];
-    x.row(k) = rhs.row(i);
-    if (!rhs.row(i).isZero(0.0)) reached[static_cast<size_t>(s.supernode_of[static_cast<size_t>(k)])] = 1;
-  }
+namespace {
+
+// The sweeps on x in the factor's numbering, for X = VectorXd (one right-hand side: Eigen takes
+// its matrix-vector kernels) or MatrixXd.
+template <typename X>
+int64_t forward_sweep(const Symbolic& s, const double* values, std::vector<char>& reached, X& x) {
   int64_t work = 0;
-  Eigen::MatrixXd update;
-  for (size_t t = 0; t < ns; ++t) {
+  X update;
+  for (size_t t = 0; t < s.supernodes(); ++t) {
     if (!reached[t]) continue;
     const int32_t k1 = s.first[t];
     const Eigen::Index ncols = s.first[t + 1] - k1, nrows = s.row_start[t + 1] - s.row_start[t];
@@ -427,7 +428,7 @@ Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* frac
     work += nrows * ncols;
     const ConstBlock block(values + s.value_start[t], nrows, ncols, Eigen::OuterStride<>(nrows));
     auto xs = x.middleRows(k1, ncols);
-    block.topRows(ncols).triangularView<Eigen::Lower>().solveInPlace(xs);
+    block.topRows(ncols).template triangularView<Eigen::Lower>().solveInPlace(xs);
     if (nrows == ncols) continue;
     update.noalias() = block.bottomRows(nrows - ncols) * xs;
     for (Eigen::Index i = 0; i < nrows - ncols; ++i) {
@@ -435,16 +436,12 @@ Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* frac
       reached[static_cast<size_t>(s.supernode_of[static_cast<size_t>(rows[ncols + i])])] = 1;
     }
   }
-  if (fraction_read) {
-    *fraction_read = s.value_start.back() > 0 ? static_cast<double>(work) / static_cast<double>(s.value_start.back()) : 1.0;
-  }
-  return x;
+  return work;
 }
 
-Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y) const {
-  const Symbolic& s = *state_->symbolic;
-  const double* values = state_->values.data();
-  Eigen::MatrixXd x = y, gathered;
+template <typename X>
+void backward_sweep(const Symbolic& s, const double* values, X& x) {
+  X gathered;
   for (size_t t = s.supernodes(); t-- > 0;) {
     const int32_t k1 = s.first[t];
     const Eigen::Index ncols = s.first[t + 1] - k1, nrows = s.row_start[t + 1] - s.row_start[t];
@@ -456,10 +453,51 @@ Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y) const {
       for (Eigen::Index i = 0; i < nrows - ncols; ++i) gathered.row(i) = x.row(rows[ncols + i]);
       xs.noalias() -= block.bottomRows(nrows - ncols).transpose() * gathered;
     }
-    block.topRows(ncols).triangularView<Eigen::Lower>().transpose().solveInPlace(xs);
+    block.topRows(ncols).template triangularView<Eigen::Lower>().transpose().solveInPlace(xs);
   }
+}
+
+}  // namespace
+
+Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* fraction_read) const {
+  const Symbolic& s = *state_->symbolic;
+  // P B, and the supernodes holding its nonzero rows: the sweep starts there and reaches every
+  // supernode one of them updates (their rows below their columns), in ascending order.
+  std::vector<char> reached(s.supernodes(), 0);
+  for (Eigen::Index i = 0; i < s.n; ++i) {
+    if (!rhs.row(i).isZero(0.0)) {
+      reached[static_cast<size_t>(s.supernode_of[static_cast<size_t>(s.position[static_cast<size_t>(i)])])] = 1;
+    }
+  }
+  int64_t work = 0;
+  Eigen::MatrixXd out(s.n, rhs.cols());
+  if (rhs.cols() == 1) {
+    Eigen::VectorXd x(s.n);
+    for (Eigen::Index i = 0; i < s.n; ++i) x[s.position[static_cast<size_t>(i)]] = rhs(i, 0);
+    work = forward_sweep(s, state_->values.data(), reached, x);
+    out.col(0) = x;
+  } else {
+    for (Eigen::Index i = 0; i < s.n; ++i) out.row(s.position[static_cast<size_t>(i)]) = rhs.row(i);
+    work = forward_sweep(s, state_->values.data(), reached, out);
+  }
+  if (fraction_read) {
+    *fraction_read = s.value_start.back() > 0 ? static_cast<double>(work) / static_cast<double>(s.value_start.back()) : 1.0;
+  }
+  return out;
+}
+
+Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y) const {
+  const Symbolic& s = *state_->symbolic;
   Eigen::MatrixXd out(y.rows(), y.cols());
-  for (Eigen::Index i = 0; i < s.n; ++i) out.row(i) = x.row(s.position[static_cast<size_t>(i)]);
+  if (y.cols() == 1) {
+    Eigen::VectorXd x = y.col(0);
+    backward_sweep(s, state_->values.data(), x);
+    for (Eigen::Index i = 0; i < s.n; ++i) out(i, 0) = x[s.position[static_cast<size_t>(i)]];
+  } else {
+    Eigen::MatrixXd x = y;
+    backward_sweep(s, state_->values.data(), x);
+    for (Eigen::Index i = 0; i < s.n; ++i) out.row(i) = x.row(s.position[static_cast<size_t>(i)]);
+  }
   return out;
 }
 
