@@ -40,7 +40,11 @@ endif()
 
 # cpp-httplib. Debian ships it split into httplib.h + libcpp-httplib.so, compiled with
 # OpenSSL, zlib and brotli support; the same macros must be defined wherever the header
-# is included, or the class layouts differ from the library's.
+# is included, or the class layouts differ from the library's. CPPHTTPLIB_USE_POLL: without it
+# cpp-httplib 0.11 waits with select(), which corrupts memory once a descriptor number reaches
+# 1024 (upstream issue #754). Debian's library is built with poll() (its select_read calls
+# poll; it imports no select), so the header is told the same; softshell's own connection loop
+# (server/http/src/listener.cpp) uses poll() and epoll only.
 if(NOT TARGET softshell_dep::httplib)
   find_path(SOFTSHELL_HTTPLIB_INCLUDE_DIR httplib.h REQUIRED)
   find_library(SOFTSHELL_HTTPLIB_LIBRARY cpp-httplib REQUIRED)
@@ -49,6 +53,6 @@ if(NOT TARGET softshell_dep::httplib)
     IMPORTED_LOCATION "${SOFTSHELL_HTTPLIB_LIBRARY}"
     INTERFACE_INCLUDE_DIRECTORIES "${SOFTSHELL_HTTPLIB_INCLUDE_DIR}"
     INTERFACE_COMPILE_DEFINITIONS
-      "CPPHTTPLIB_OPENSSL_SUPPORT;CPPHTTPLIB_ZLIB_SUPPORT;CPPHTTPLIB_BROTLI_SUPPORT"
+      "CPPHTTPLIB_OPENSSL_SUPPORT;CPPHTTPLIB_ZLIB_SUPPORT;CPPHTTPLIB_BROTLI_SUPPORT;CPPHTTPLIB_USE_POLL"
     INTERFACE_LINK_LIBRARIES "OpenSSL::Crypto;Threads::Threads")
 endif()

@@ -170,6 +170,18 @@ namespace Softshell
         public double progress;        // precomputation progress in [0, 1]
     }
 
+    /// <summary>Stress state at one surface point (local frame: e1 along du, e3 the normal).</summary>
+    [StructLayout(LayoutKind.Sequential)]
+    public struct StressSample
+    {
+        public SurfacePoint point;
+        public Vec3 position;          // rest limit position
+        public Vec3 membrane_force;    // n11, n22, n12 (N/m)
+        public Vec3 bending_moment;    // m11, m22, m12 (N m / m)
+        public double von_mises_top;   // Pa, at +t/2
+        public double von_mises_bottom; // Pa, at -t/2
+    }
+
     /// <summary>Options of the in-process server (blittable: the host is a fixed 64-byte buffer).</summary>
     [StructLayout(LayoutKind.Sequential)]
     public unsafe struct EmbeddedOptions
@@ -417,5 +429,15 @@ namespace Softshell
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_session_limit_comb(IntPtr session, ref GeomId id, ref SurfacePoint point, int[] outIndices,
                                                           double[] outPosition, double[] outDu, double[] outDv, int capacity, out int count);
+
+        /// <summary>level 1..4 (tessellation vertices) with points null/0, or level 0 with points.</summary>
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_session_stresses(IntPtr session, ref GeomId id, uint resId, int level, SurfacePoint[] points,
+                                                        int numPoints, double yieldStrength, out IntPtr field);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_stress_field_samples(IntPtr field, [Out] StressSample[] outSamples, int capacity, out int count);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_stress_field_max(IntPtr field, out StressSample max, out int exceedsYield);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] public static extern void ss_stress_field_destroy(IntPtr field);
     }
 }

@@ -1,6 +1,6 @@
 #pragma once
-// The demo's Bullet phase: rigid bodies of different mass dropped on the shell, which dents
-// under them through the bridge (plugin_bullet).
+// The demo's Bullet phase: boxes of different mass dropped on the shell, which dents under them
+// through the bridge (plugin_bullet).
 
 #include <array>
 #include <cstdint>
@@ -8,33 +8,47 @@
 #include <memory>
 #include <vector>
 
-#include "softshell/interaction.h"
-#include "softshell/picking.h"
+#include "softshell/deformation.h"
 #include "softshell/session.h"
 
 namespace softshell::demo {
 
-struct BulletPhaseResult {
-  int bodies = 0;
-  int contacts = 0;              ///< contact points seen over all steps
-  int requests = 0;              ///< deformation requests the bridge sent
-  double max_deflection = 0.0;   ///< largest limit-surface displacement of a received result (m)
-  std::vector<Vec3> positions;   ///< control points of the last result shown (empty if none)
-  struct BodyMesh {              ///< the bodies where they came to rest, for the picture
-    std::vector<Vec3> vertices, normals;
-    std::vector<std::array<int32_t, 3>> triangles;
-  };
-  std::vector<BodyMesh> body_meshes;
-  std::vector<double> masses;    ///< kg, per body
+struct Context;
+
+/// What the Bullet world is made of.
+struct BulletSetup {
+  DeformationRequest supports;   ///< what holds the shell (floor contacts, pins)
+  Vec3 up = Vec3::UnitY();       ///< gravity is -9.81 m/s² along it
+  double floor_height = 0.0;     ///< the ground plane: up . x = floor_height
+  std::vector<Vec3> spots;       ///< where the boxes land (rest surface points)
+  std::vector<double> masses;    ///< kg, one per spot
+  double half = 0.05;            ///< half edge of the boxes (m)
+  int level = 2;                 ///< collision mesh tessellation level
+  int steps = 240;               ///< Bullet steps of 1/60 s
 };
 
-/// Runs `steps` Bullet steps of 1/60 s with three boxes (1, 5 and 20 kg) dropped on the shell
-/// `id`, held by `floor`, with the ground plane at height `floor_y` (+y up). The boxes start just
-/// above the points where vertical rays through `picker` (the rest shape) hit the object's top.
-/// `on_result` is called with every result id the bridge shows.
-BulletPhaseResult run_bullet_phase(const std::shared_ptr<Session>& session, const GeomId& id,
-                                   const ControlMesh& mesh, const FloorContact& floor, double floor_y,
-                                   const Picker& picker, int level, int steps,
-                                   const std::function<void(uint32_t)>& on_result);
+struct BulletPhaseResult {
+  int contacts = 0;              ///< contact points seen over all steps
+  int requests = 0;              ///< deformation requests the bridge sent
+  uint32_t res_id = 0;           ///< the last result shown (0: none)
+  std::vector<Vec3> positions;   ///< its control points (empty if none)
+  struct Body {
+    std::array<Vec3, 8> corners; ///< where it came to rest
+    double mass = 0.0;           ///< kg
+    bool on_shell = false;       ///< touching the shell at the end
+  };
+  std::vector<Body> bodies;
+};
+
+/// Every result the bridge shows: its id and control points.
+using OnResult = std::function<void(uint32_t res_id, const std::vector<Vec3>& positions)>;
+
+/// Runs the Bullet world on the shell `id` (uploaded from `mesh`).
+BulletPhaseResult run_bullet_world(const std::shared_ptr<Session>& session, const GeomId& id, const ControlMesh& mesh,
+                                   const BulletSetup& setup, const OnResult& on_result);
+
+/// The phase in the script: picks flat spots on top, chooses masses that dent the shell inside
+/// the linear model's range (from a probe), runs the world, and records what happened.
+void bullet_phase(Context& c);
 
 }  // namespace softshell::demo

@@ -15,11 +15,19 @@ namespace softshell::demo {
 struct DemoOptions {
   std::filesystem::path mesh;            ///< control mesh (OBJ); empty = the shipped spot
   Material material = material_preset("rubber", 0.01).value();  ///< SI units, the mesh's unit is metres
-  std::string material_name = "rubber";
+  std::string material_name = "rubber";  ///< a preset's name gives its yield strength
   std::string server_url;                ///< empty = embedded server (with an HTTP listener for the follower)
   std::filesystem::path out_dir = "demo-out";
   int level = 3;                         ///< tessellation level for picking, rendering and the OBJ
   int deformations = 120;                ///< at least this many push/pull deformations (>= 10)
+  /// The object's up axis (0 = x, 1 = y, 2 = z); empty = detected (the axis it rests on best,
+  /// +y, the OBJ convention, when that rests as well as any).
+  std::optional<int> up_axis;
+  /// A brief script (two steps per phase, at most 60 Bullet steps) for tests and quick looks.
+  bool short_script = false;
+  /// Multiplies the loads the script chose to stay inside the linear model's range (> 1 leaves it
+  /// on purpose, and the report then warns).
+  double load_scale = 1.0;
   bool follower = true;                  ///< run the second client
   bool bullet = true;                    ///< drop rigid bodies through the Bullet bridge
   int bullet_steps = 240;                ///< Bullet steps at 1/60 s
@@ -31,29 +39,63 @@ struct DemoOptions {
 /// What the session did (the summary and the --json line).
 struct DemoReport {
   std::string mesh;
-  std::string mesh_path;  // the file read (the default: beside the installed program, else the source tree)
+  std::string mesh_path;                 ///< the file read (the default: beside the installed program, else the source tree)
   std::string material;
   std::string server;                    ///< "embedded" or "remote"
   int control_points = 0, faces = 0;
-  int deformations = 0;
+  /// False if the server already held this geometry (uploaded before): nothing was precomputed
+  /// and `precompute_ms` only measures the upload.
+  bool precomputed_now = true;
   double precompute_ms = 0.0;
+  /// How the script adapted to the object.
+  struct Setup {
+    char up = 'y';
+    bool up_detected = true;
+    double size = 0.0;                   ///< m, bounding diagonal of the rest limit surface
+    double height = 0.0;                 ///< m, extent along the up axis
+    int parts = 0;                       ///< connected pieces of the mesh
+    int resting_parts = 0;               ///< held by the floor; the others are pinned
+    int floor_points = 0;                ///< limit points held on the floor
+    int pins = 0;                        ///< points pinned where they are
+    std::string supports;                ///< how it is held, in words
+  } setup;
+  /// The loads the script chose (scaled to the material and to `load_scale`).
+  struct Loads {
+    double grab = 0.0;                   ///< m, largest hand displacement of the first grab
+    double push = 0.0;                   ///< N, largest push
+    std::vector<double> box_masses;      ///< kg
+  } loads;
+  int deformations = 0;                  ///< requests answered, calibration probes included
+  int probes = 0;                        ///< of which calibration probes (one per phase)
   double latency_p50_ms = 0.0, latency_p95_ms = 0.0, latency_max_ms = 0.0;
   uint32_t last_res_id = 0;
   struct Follower {
+    bool ran = false;
     int received = 0;
     uint32_t final_res_id = 0;
     double max_lag_ms = 0.0;
     bool matches_master = false;         ///< ends with the master's last result, same positions
   } follower;
   struct Bullet {
+    bool ran = false;
     int bodies = 0;
+    int on_shell = 0;                    ///< bodies resting on the shell at the end (the others fell off)
     int contacts = 0;
     int requests = 0;
     double max_deflection = 0.0;         ///< metres, limit surface
   } bullet;
-  double max_displacement = 0.0;         ///< metres, final push/pull state (limit surface)
-  double max_von_mises = 0.0;            ///< Pa, final push/pull state
-  bool exceeds_yield = false;
+  /// The final state (two hands pulling).
+  struct Final {
+    double max_displacement = 0.0;       ///< m, limit surface
+    std::optional<double> max_von_mises; ///< Pa; empty if the server has no stresses
+    double max_rotation = 0.0;           ///< rad, of the surface normal
+    std::optional<double> max_strain;    ///< von Mises stress / E
+    bool exceeds_yield = false;
+  } final;
+  /// A result left the linear model's range: what, where and what to do (also on stderr).
+  std::vector<std::string> warnings;
+  /// Things worth knowing that are not wrong (stresses unavailable, geometry precomputed before).
+  std::vector<std::string> notes;
   std::vector<std::string> outputs;      ///< files written
 };
 

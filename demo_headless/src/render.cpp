@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #define STB_IMAGE_WRITE_IMPLEMENTATION
 #define STB_IMAGE_WRITE_STATIC
@@ -12,9 +13,14 @@ namespace softshell::demo {
 
 Image::Image(int w, int h) : width(w), height(h), rgb(static_cast<size_t>(3 * w * h), 0) {}
 
-void Image::set(int x, int y, const std::array<uint8_t, 3>& c) {
+void Image::set(int x, int y, const Rgb& c) {
   if (x < 0 || y < 0 || x >= width || y >= height) return;
   std::copy(c.begin(), c.end(), rgb.begin() + 3 * (static_cast<ptrdiff_t>(y) * width + x));
+}
+
+Rgb Image::at(int x, int y) const {
+  const auto* p = rgb.data() + 3 * (static_cast<ptrdiff_t>(y) * width + x);
+  return {p[0], p[1], p[2]};
 }
 
 Result<void> Image::write_png(const std::filesystem::path& path) const {
@@ -28,20 +34,20 @@ Camera Camera::framing(const Vec3& lo, const Vec3& hi, const Vec3& from, const V
   Camera c;
   c.target = 0.5 * (lo + hi);
   const double radius = 0.5 * (hi - lo).norm();
-  // The bounding sphere just fits the view (a little tighter: boxes are not spheres).
-  const double distance = 0.85 * radius / std::tan(0.5 * c.fov_deg * 3.14159265358979 / 180.0);
+  // The bounding sphere just fits the view, with room for the caption.
+  const double distance = 1.05 * radius / std::tan(0.5 * c.fov_deg * 3.14159265358979 / 180.0);
   c.eye = c.target + distance * from.normalized();
   c.up = up;
   return c;
 }
 
-std::array<uint8_t, 3> viridis(double t) {
+Rgb viridis(double t) {
   static const double table[9][3] = {{68, 1, 84},    {71, 44, 122},  {59, 81, 139},   {44, 113, 142}, {33, 144, 141},
                                      {39, 173, 129}, {92, 200, 99},  {170, 220, 50},  {253, 231, 37}};
   t = std::clamp(std::isfinite(t) ? t : 0.0, 0.0, 1.0) * 8.0;
   const int i = std::min(static_cast<int>(t), 7);
   const double f = t - i;
-  std::array<uint8_t, 3> c;
+  Rgb c;
   for (int k = 0; k < 3; ++k) c[static_cast<size_t>(k)] = static_cast<uint8_t>(table[i][k] * (1 - f) + table[i + 1][k] * f + 0.5);
   return c;
 }
@@ -77,25 +83,64 @@ Renderer::Renderer(int width, int height, const Camera& camera)
   view_proj_ = proj * view;
 }
 
+std::optional<std::array<double, 2>> Renderer::project(const Vec3& p) const {
+  const Eigen::Vector4d clip = view_proj_ * Eigen::Vector4d(p.x(), p.y(), p.z(), 1.0);
+  if (clip.w() <= 0.0) return std::nullopt;
+  return std::array<double, 2>{(clip.x() / clip.w() * 0.5 + 0.5) * w_ / ss_, (0.5 - clip.y() / clip.w() * 0.5) * h_ / ss_};
+}
+
+bool Renderer::visible(const Vec3& p, double tolerance) const {
+  const Eigen::Vector4d clip = view_proj_ * Eigen::Vector4d(p.x(), p.y(), p.z(), 1.0);
+  if (clip.w() <= 0.0) return false;
+  const int x = static_cast<int>((clip.x() / clip.w() * 0.5 + 0.5) * w_), y = static_cast<int>((0.5 - clip.y() / clip.w() * 0.5) * h_);
+  if (x < 0 || y < 0 || x >= w_ || y >= h_) return false;
+  return clip.w() <= depth_[static_cast<size_t>(y * w_ + x)] + tolerance;
+}
+
+std::array<double, 3> Renderer::shade(const ShadedMesh& mesh, const std::array<int32_t, 3>& tri, double w0, double w1,
+                                      double w2, const Vec3& light, const Vec3& view_dir) const {
+  const auto at = [&](int k) { return static_cast<size_t>(tri[static_cast<size_t>(k)]); };
+  Vec3 n = w0 * (*mesh.normals)[at(0)] + w1 * (*mesh.normals)[at(1)] + w2 * (*mesh.normals)[at(2)];
+  n.normalize();
+  if (n.dot(view_dir) < 0) n = -n;  // two-sided lighting for open shells
+  std::array<double, 3> base = {double(mesh.colour[0]), double(mesh.colour[1]), double(mesh.colour[2])};
+  const double range = mesh.scalar_max - mesh.scalar_min;
+  if (mesh.scalar && range > 0) {
+    const double s = w0 * (*mesh.scalar)[at(0)] + w1 * (*mesh.scalar)[at(1)] + w2 * (*mesh.scalar)[at(2)];
+    const Rgb c8 = viridis((s - mesh.scalar_min) / range);
+    base = {double(c8[0]), double(c8[1]), double(c8[2])};
+  } else if (mesh.colours) {
+    for (size_t k = 0; k < 3; ++k) {
+      base[k] = w0 * (*mesh.colours)[at(0)][k] + w1 * (*mesh.colours)[at(1)][k] + w2 * (*mesh.colours)[at(2)][k];
+    }
+  }
+  const double diffuse = std::max(0.0, n.dot(light));
+  const double specular = mesh.ghost ? 0.0 : std::pow(std::max(0.0, n.dot((light + view_dir).normalized())), 40.0);
+  const double shade = mesh.ghost ? 0.75 + 0.25 * diffuse : 0.35 + 0.65 * diffuse;
+  std::array<double, 3> out;
+  for (size_t k = 0; k < 3; ++k) out[k] = std::min(255.0, base[k] * shade + 60.0 * specular);
+  return out;
+}
+
 void Renderer::draw(const ShadedMesh& mesh) {
   const auto& verts = *mesh.vertices;
-  // Project every vertex once.
+  // Project every vertex once: screen position and 1 / (eye distance), which is affine on screen.
   std::vector<Eigen::Vector3d> screen(verts.size());
+  const double near = 1e-3 * (camera_.eye - camera_.target).norm();
   for (size_t i = 0; i < verts.size(); ++i) {
     const Eigen::Vector4d clip = view_proj_ * Eigen::Vector4d(verts[i].x(), verts[i].y(), verts[i].z(), 1.0);
     screen[i] = Eigen::Vector3d((clip.x() / clip.w() * 0.5 + 0.5) * w_, (0.5 - clip.y() / clip.w() * 0.5) * h_,
-                                clip.w() > 0 ? clip.z() / clip.w() : 2.0);
+                                clip.w() > near ? 1.0 / clip.w() : -1.0);
   }
   const Vec3 light = ((camera_.eye - camera_.target).normalized() + 0.6 * camera_.up.normalized() +
                       0.3 * (camera_.eye - camera_.target).cross(camera_.up).normalized())
                          .normalized();
   const Vec3 view_dir = (camera_.eye - camera_.target).normalized();
-  const double range = mesh.scalar_max - mesh.scalar_min;
   for (const auto& tri : *mesh.triangles) {
     const Eigen::Vector3d& a = screen[static_cast<size_t>(tri[0])];
     const Eigen::Vector3d& b = screen[static_cast<size_t>(tri[1])];
     const Eigen::Vector3d& c = screen[static_cast<size_t>(tri[2])];
-    if (a.z() > 1 || b.z() > 1 || c.z() > 1) continue;  // behind the camera
+    if (a.z() < 0 || b.z() < 0 || c.z() < 0) continue;  // behind (or too near) the camera
     const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
     if (area == 0.0) continue;
     const int x0 = std::max(0, static_cast<int>(std::floor(std::min({a.x(), b.x(), c.x()}))));
@@ -109,42 +154,75 @@ void Renderer::draw(const ShadedMesh& mesh) {
         const double w1 = ((c.x() - px) * (a.y() - py) - (c.y() - py) * (a.x() - px)) / area;
         const double w2 = 1.0 - w0 - w1;
         if (w0 < 0 || w1 < 0 || w2 < 0) continue;
-        const auto depth = static_cast<float>(w0 * a.z() + w1 * b.z() + w2 * c.z());
+        const double depth = 1.0 / (w0 * a.z() + w1 * b.z() + w2 * c.z());
         float& stored = depth_[static_cast<size_t>(y * w_ + x)];
-        if (depth >= stored) continue;
-        stored = depth;
-        Vec3 n = w0 * (*mesh.normals)[static_cast<size_t>(tri[0])] + w1 * (*mesh.normals)[static_cast<size_t>(tri[1])] +
-                 w2 * (*mesh.normals)[static_cast<size_t>(tri[2])];
-        n.normalize();
-        if (n.dot(view_dir) < 0) n = -n;  // two-sided lighting for open shells
-        std::array<double, 3> base = {190, 190, 195};
-        if (mesh.scalar && range > 0) {
-          const double s = w0 * (*mesh.scalar)[static_cast<size_t>(tri[0])] + w1 * (*mesh.scalar)[static_cast<size_t>(tri[1])] +
-                           w2 * (*mesh.scalar)[static_cast<size_t>(tri[2])];
-          const auto c8 = viridis((s - mesh.scalar_min) / range);
-          base = {double(c8[0]), double(c8[1]), double(c8[2])};
-        }
-        const double diffuse = std::max(0.0, n.dot(light));
-        const double specular = std::pow(std::max(0.0, n.dot((light + view_dir).normalized())), 40.0);
-        const double shade = 0.35 + 0.65 * diffuse;
         auto& out = colour_[static_cast<size_t>(y * w_ + x)];
-        for (int k = 0; k < 3; ++k) {
-          out[static_cast<size_t>(k)] = static_cast<float>(std::min(255.0, base[static_cast<size_t>(k)] * shade + 60.0 * specular));
+        if (mesh.ghost) {
+          // Fades in over a few biases in front of what is drawn, so its edges are soft.
+          const double in_front = stored - depth - mesh.ghost_bias;
+          if (!(in_front > 0.0)) continue;
+          const double alpha = mesh.opacity * std::min(1.0, in_front / (3.0 * mesh.ghost_bias + 1e-300));
+          const auto c3 = shade(mesh, tri, w0, w1, w2, light, view_dir);
+          for (size_t k = 0; k < 3; ++k) out[k] = static_cast<float>((1.0 - alpha) * out[k] + alpha * c3[k]);
+          continue;
         }
+        if (depth >= stored) continue;
+        stored = static_cast<float>(depth);
+        const auto c3 = shade(mesh, tri, w0, w1, w2, light, view_dir);
+        for (size_t k = 0; k < 3; ++k) out[k] = static_cast<float>(c3[k]);
       }
     }
   }
 }
 
-void Renderer::fill_rect(double x0, double y0, double x1, double y1, const std::array<uint8_t, 3>& c) {
+void Renderer::fill_rect(double x0, double y0, double x1, double y1, const Rgb& c, double alpha) {
   for (int y = std::max(0, static_cast<int>(y0)); y < std::min(h_, static_cast<int>(y1)); ++y) {
     for (int x = std::max(0, static_cast<int>(x0)); x < std::min(w_, static_cast<int>(x1)); ++x) {
-      colour_[static_cast<size_t>(y * w_ + x)] = {float(c[0]), float(c[1]), float(c[2])};
+      auto& out = colour_[static_cast<size_t>(y * w_ + x)];
+      for (size_t k = 0; k < 3; ++k) out[k] = static_cast<float>((1.0 - alpha) * out[k] + alpha * c[k]);
     }
   }
 }
 
-void Renderer::text(int x, int y, const std::string& s, const std::array<uint8_t, 3>& colour, int scale) {
+int Renderer::text_width(const std::string& s, int scale) {
+  std::string copy = s;
+  return stb_easy_font_width(copy.data()) * scale;
+}
+
+int Renderer::paragraph(int x, int y, const std::string& s, const Rgb& colour, int scale, int max_width) {
+  std::string line, word;
+  const int line_height = 12 * scale;
+  const auto flush = [&] {
+    if (!line.empty()) text(x, y, line, colour, scale);
+    y += line_height;
+    line.clear();
+  };
+  for (size_t i = 0; i <= s.size(); ++i) {
+    if (i < s.size() && s[i] != ' ') {
+      word += s[i];
+      continue;
+    }
+    const std::string candidate = line.empty() ? word : line + " " + word;
+    if (!line.empty() && text_width(candidate, scale) > max_width) {
+      flush();
+      line = word;
+    } else {
+      line = candidate;
+    }
+    word.clear();
+  }
+  flush();
+  return y;
+}
+
+void Renderer::label(double x, double y, const std::string& s, const Rgb& colour) {
+  const int w = text_width(s, 1), h = 10;
+  const double left = x - 0.5 * w, top = y - 0.5 * h;
+  fill_rect((left - 3) * ss_, (top - 2) * ss_, (left + w + 3) * ss_, (top + h + 1) * ss_, {255, 255, 255}, 0.8);
+  text(static_cast<int>(std::lround(left)), static_cast<int>(std::lround(top)), s, colour, 1);
+}
+
+void Renderer::text(int x, int y, const std::string& s, const Rgb& colour, int scale) {
   std::vector<char> buffer(s.size() * 300 + 1000);
   std::string copy = s;
   const int quads = stb_easy_font_print(0, 0, copy.data(), nullptr, buffer.data(), static_cast<int>(buffer.size()));
@@ -168,7 +246,7 @@ void Renderer::colour_bar(const std::string& title, double min, double max, cons
   text(bar_x - 10, bar_top - 18, label, {30, 30, 30}, 1);
   std::snprintf(label, sizeof label, "%.3g", min);
   text(bar_x - 10, bar_bottom + 6, label, {30, 30, 30}, 1);
-  text(width - 20 - static_cast<int>(title.size()) * 6, bar_top - 34, title, {30, 30, 30}, 1);
+  text(width - 12 - text_width(title, 1), bar_top - 34, title, {30, 30, 30}, 1);
 }
 
 Image Renderer::image() const {

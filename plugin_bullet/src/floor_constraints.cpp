@@ -22,23 +22,16 @@ Result<std::vector<VertexConstraint>> floor_constraints(const Tessellation& tess
     }
     if (!shell_to_world.matrix().allFinite()) fail(ErrorCode::kInvalidArgument, "non-finite shell transform");
 
-    const auto& x = tessellation.vertices();
-    double tolerance = settings.tolerance;
-    if (tolerance < 0.0) {
-      Vec3 lo = Vec3::Constant(std::numeric_limits<double>::max()), hi = -lo;
-      for (const Vec3& p : x) {
-        lo = lo.cwiseMin(p);
-        hi = hi.cwiseMax(p);
-      }
-      tolerance = x.empty() ? 0.0 : 1e-3 * (hi - lo).norm();
-    }
+    // Which samples touch: the SDK's one floor rule (interaction.h), on the plane taken into the
+    // shell's frame, where the tessellation lives.
+    const Eigen::Isometry3d world_to_shell = shell_to_world.inverse();
+    const Plane plane{world_to_shell * settings.point, world_to_shell.linear() * settings.normal.normalized()};
+    const std::vector<int32_t> touching = floor_touching_samples(tessellation, plane, settings.tolerance).value();
 
-    // Samples that touch, and the control point that dominates the surface at each.
-    const Vec3 n = settings.normal.normalized();
+    // The control point that dominates the surface at each touching sample.
     const auto& limit = tessellation.limit_matrix();  // rows: samples, columns: control points
     std::vector<uint8_t> held(static_cast<size_t>(limit.cols()), 0);
-    for (size_t i = 0; i < x.size(); ++i) {
-      if (n.dot(shell_to_world * x[i] - settings.point) > tolerance) continue;
+    for (int32_t i : touching) {
       Eigen::Index best = -1;
       double best_weight = -std::numeric_limits<double>::infinity();
       for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(limit, static_cast<Eigen::Index>(i)); it;
@@ -83,10 +76,7 @@ Result<DeformationRequest> floor_request(const Tessellation& tessellation, const
     if (settings.mask == kAxisAll) {
       options.axes = FloorAxes::kAll;
     } else {
-      int axis = -1;
-      for (int a = 0; a < 3; ++a) {
-        if (std::abs(std::abs(plane.normal[a]) - 1.0) <= 1e-9) axis = a;
-      }
+      const int axis = coordinate_axis(plane.normal);
       if (axis < 0 || settings.mask != (1u << axis)) {
         fail(ErrorCode::kInvalidArgument,
              "floor hold kLimitPoints takes a mask of all axes or of the floor normal's axis in the shell's frame");

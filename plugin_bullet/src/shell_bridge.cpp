@@ -102,15 +102,16 @@ struct ShellBridge::Shell {
   std::optional<Error> prepare_error;
 };
 
-ShellBridge::ShellBridge(btDiscreteDynamicsWorld& world) : world_(world) {}
+ShellBridge::ShellBridge(btDiscreteDynamicsWorld& world, std::shared_ptr<Executor> executor)
+    : world_(world), executor_(executor ? std::move(executor) : default_executor()) {}
 
 ShellBridge::~ShellBridge() {
   {
-    std::lock_guard lock(mutex_);
+    // The running task finishes its job and ends; no new one starts.
+    std::unique_lock lock(mutex_);
     stopping_ = true;
+    done_.wait(lock, [&] { return !working_; });
   }
-  wake_.notify_all();
-  if (worker_.joinable()) worker_.join();
   for (auto& slot : slots_) {
     if (slot) world_.removeCollisionObject(&slot->object);
   }
@@ -190,7 +191,7 @@ Result<void> ShellBridge::remove_shell(ShellId shell) {
     Shell& s = get(shell);
     std::unique_ptr<Shell> removed;
     {
-      // Wait for the worker to leave this shell's mesh alone, then take it out of the slots.
+      // Wait for the task to leave this shell's mesh alone, then take it out of the slots.
       std::unique_lock lock(mutex_);
       done_.wait(lock, [&] { return !s.preparing; });
       removed = std::move(slots_[shell.index]);
@@ -207,23 +208,42 @@ std::vector<ShellId> ShellBridge::shells() const {
   return out;
 }
 
+// A shell with a result waiting whose last prepared shape was committed (a prepared shape is
+// committed before the next one is prepared over it).
+bool ShellBridge::runnable_locked() const {
+  for (const auto& slot : slots_) {
+    if (slot && slot->queued && !slot->preparing && !slot->ready) return true;
+  }
+  return false;
+}
+
+// Posts the task unless one runs (it then picks the new job up) or nothing is runnable.
+void ShellBridge::start_work() {
+  {
+    std::lock_guard lock(mutex_);
+    if (working_ || stopping_ || !runnable_locked()) return;
+    working_ = true;
+  }
+  executor_->post([this] { work(); });
+}
+
 void ShellBridge::work() {
   std::unique_lock lock(mutex_);
   for (;;) {
-    // The next shell with a result waiting (the mutex guards the slots and the job states).
     Shell* job = nullptr;
-    wake_.wait(lock, [&] {
-      if (stopping_) return true;
+    if (!stopping_) {
       for (auto& slot : slots_) {
-        // A prepared shape is committed before the next one is prepared over it.
         if (slot && slot->queued && !slot->preparing && !slot->ready) {
           job = slot.get();
-          return true;
+          break;
         }
       }
-      return false;
-    });
-    if (stopping_) return;
+    }
+    if (!job) {
+      working_ = false;
+      done_.notify_all();
+      return;
+    }
     DeformationResult result = std::move(*job->queued);
     job->queued.reset();
     job->preparing = true;
@@ -300,13 +320,12 @@ void ShellBridge::receive(Shell& shell, ChannelAnswer& answer, UpdateReport& rep
   shell.stats.last_error.reset();
 
   if (shell.settings.background_mesh_update) {
-    // Hand the positions to the worker (replacing a result it has not started on).
+    // Hand the positions to the task (replacing a result it has not started on).
     {
       std::lock_guard lock(mutex_);
       shell.queued = std::move(result);
-      if (!worker_.joinable()) worker_ = std::thread([this] { work(); });
     }
-    wake_.notify_all();
+    start_work();
     return;
   }
   auto applied = capture([&] { shell.mesh->update(std::move(result.positions)); });
@@ -333,7 +352,7 @@ void ShellBridge::commit_prepared(Shell& shell, UpdateReport& report) {
     }
   }
   if (res_id) {
-    wake_.notify_all();  // the worker may go on with a result queued meanwhile
+    start_work();  // a result queued meanwhile can be prepared now
     show(shell, *res_id, report);
   }
 }
@@ -457,7 +476,7 @@ Result<void> ShellBridge::wait_idle(std::chrono::milliseconds timeout) {
     if (LatestWinsChannel::Clock::now() >= deadline) {
       return Error{ErrorCode::kUnavailable, "ShellBridge::wait_idle: requests still in flight after the timeout"};
     }
-    // Wait a little for a request in flight or the worker; a rate-limited pending request waits
+    // Wait a little for a request in flight or the mesh task; a rate-limited pending request waits
     // for its time.
     bool waited = false;
     for (auto& slot : slots_) {

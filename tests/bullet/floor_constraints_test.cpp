@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include "softshell/interaction.h"
 #include "test_meshes.h"
 
 namespace softshell::bullet {
@@ -65,6 +66,47 @@ TEST(FloorConstraints, FollowThePlacementInTheWorld) {
   // A large tolerance reaches up the arch (0.15 above the floor: x < 1/6, the second rows).
   floor.tolerance = 0.25;
   EXPECT_GT(floor_constraints(t, placement, floor)->size(), 10u);
+}
+
+// One rule decides what touches for both holds (the SDK's floor_touching_samples): the default
+// tolerance is 1e-3 of the rest mesh's size, also once the shape shown has been deformed (here
+// stretched to twice its size, which would double a tolerance taken from the shown shape).
+TEST(FloorConstraints, BothHoldsUseTheSdksTouchingRule) {
+  const ControlMesh mesh = arch();
+  Tessellation t = tessellate(mesh);
+  const double rest_size = mesh.bounding_diagonal();
+  std::vector<Vec3> stretched = mesh.positions();
+  for (Vec3& p : stretched) p.head<2>() *= 2.0;
+  // Just above the default tolerance of the rest size, just below twice it.
+  for (Vec3& p : stretched) {
+    if (std::abs(p.z()) < 1e-12) p.z() = 1.5e-3 * rest_size;
+  }
+  t.update(stretched);
+  FloorSettings floor;
+  floor.normal = Vec3::UnitZ();
+  const auto touching = floor_touching_samples(t, Plane{Vec3::Zero(), Vec3::UnitZ()}, -1.0);
+  ASSERT_TRUE(touching.ok()) << touching.error().message;
+  EXPECT_TRUE(touching->empty());
+  EXPECT_TRUE(floor_constraints(t, Eigen::Isometry3d::Identity(), floor)->empty());
+  floor.hold = FloorHold::kLimitPoints;
+  EXPECT_TRUE(floor_request(t, Eigen::Isometry3d::Identity(), floor)->limit_constraints.empty());
+
+  // With a tolerance that reaches them, both holds hold exactly the touching samples' parts.
+  floor.tolerance = 2e-3 * rest_size;
+  const auto reached = floor_touching_samples(t, Plane{Vec3::Zero(), Vec3::UnitZ()}, floor.tolerance).value();
+  EXPECT_FALSE(reached.empty());
+  std::set<int32_t> faces;
+  for (int32_t i : reached) faces.insert(t.vertex_points()[static_cast<size_t>(i)].face);
+  const DeformationRequest limit_points = floor_request(t, Eigen::Isometry3d::Identity(), floor).value();
+  EXPECT_EQ(limit_points.limit_constraints.size(), faces.size());
+  floor.hold = FloorHold::kControlPoints;
+  EXPECT_EQ(floor_constraints(t, Eigen::Isometry3d::Identity(), floor)->size(), 10u);
+
+  EXPECT_EQ(coordinate_axis(Vec3(0, -3, 0)), 1);
+  EXPECT_EQ(coordinate_axis(Vec3(0, 1, 1e-3)), -1);  // tilted by 1 mrad
+  EXPECT_EQ(coordinate_axis(Vec3::Zero()), -1);
+  EXPECT_FALSE(floor_touching_samples(t, Plane{Vec3::Zero(), Vec3::Zero()}, -1.0).ok());
+  EXPECT_FALSE(floor_touching_samples(t, Plane{Vec3::Zero(), Vec3::UnitZ()}, std::nan("")).ok());
 }
 
 TEST(FloorConstraints, RequestHoldsControlPointsOrLimitPoints) {

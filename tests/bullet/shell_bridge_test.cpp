@@ -1,5 +1,6 @@
 #include "softshell/bullet/shell_bridge.h"
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <functional>
@@ -200,6 +201,45 @@ TEST(ShellBridge, SphereOnPlateDentsItAndSendsItsWeight) {
     EXPECT_LT((limit - local).norm(), 2e-4) << "hit " << local.transpose() << " limit " << limit.transpose();
   });
   expect_dent_under_the_sphere(drop, mass);
+}
+
+// The background mesh updates run where the host says: each on its executor (counted here), and
+// with an InlineExecutor inside update() itself, with the same deflection either way.
+TEST(ShellBridge, BackgroundMeshUpdatesRunOnTheHostsExecutor) {
+  struct CountingExecutor final : Executor {
+    ThreadPool pool{1};
+    std::atomic<int> posted{0};
+    void post(std::function<void()> task) override {
+      ++posted;
+      pool.post(std::move(task));
+    }
+    int concurrency() const override { return 1; }
+  };
+  auto run = [](std::shared_ptr<Executor> executor) {
+    Plate plate;
+    test::BulletWorld scene(-kGravity * plate.up());
+    ShellBridge bridge(scene.world, std::move(executor));
+    const ShellId shell = bridge.add_shell(make_session(), plate.mesh, plate.material, plate.settings()).value();
+    btRigidBody* sphere = scene.add_sphere(0.05, 1.0, plate.up() * static_cast<btScalar>(0.08));
+    sphere->setActivationState(DISABLE_DEACTIVATION);
+    lockstep(scene, bridge, 240);
+    const ShellStats stats = bridge.stats(shell);
+    EXPECT_GT(stats.results_applied, 0u);
+    EXPECT_FALSE(stats.last_error.has_value()) << stats.last_error->message;
+    double deflection = 0.0;
+    const auto rest = Tessellation::create(LimitEvaluator::create(plate.mesh).value(), 2).value();
+    const auto& now = bridge.collision_mesh(shell).tessellation().vertices();
+    for (size_t i = 0; i < now.size(); ++i) deflection = std::max(deflection, rest.vertices()[i].z() - now[i].z());
+    return std::make_pair(stats.results_applied, deflection);
+  };
+  auto counting = std::make_shared<CountingExecutor>();
+  const auto [applied, deflection] = run(counting);
+  EXPECT_GT(counting->posted.load(), 0);
+  EXPECT_LE(counting->posted.load(), static_cast<int>(applied));  // one task per burst of results, never more
+  const auto [inline_applied, inline_deflection] = run(std::make_shared<InlineExecutor>());
+  EXPECT_GT(inline_applied, 0u);
+  EXPECT_GT(deflection, 0.0);
+  EXPECT_NEAR(inline_deflection, deflection, 0.05 * deflection);
 }
 
 TEST(ShellBridge, WorksInTheShellsOwnFrame) {

@@ -75,6 +75,23 @@ static class SoftshellSmoke
         return request;
     }
 
+    // The stresses of result resId at the level-1 tessellation's vertices (size query, then read).
+    static StressSample[] Stresses(IntPtr session, GeomId id, uint resId)
+    {
+        IntPtr field;
+        Native.Check(Native.ss_session_stresses(session, ref id, resId, 1, null, 0, 0.0, out field));
+        int count;
+        Native.Check(Native.ss_stress_field_samples(field, null, 0, out count));
+        var samples = new StressSample[count];
+        Native.Check(Native.ss_stress_field_samples(field, samples, count, out count));
+        StressSample max;
+        int exceeds;
+        Native.Check(Native.ss_stress_field_max(field, out max, out exceeds));
+        Check(exceeds == 0 && max.von_mises_top >= 0, "no yield strength given: nothing flagged");
+        Native.ss_stress_field_destroy(field);
+        return samples;
+    }
+
     // Deforms without blocking: one poll per "frame", as a game loop does.
     static double[] DeformAsync(IntPtr session, GeomId id, IntPtr request, out int frames)
     {
@@ -188,6 +205,20 @@ static class SoftshellSmoke
         Check(tip < -1e-9, "the free edge goes down");
         Check(worstLinearity <= 1e-9 * Math.Abs(tip), "twice the force, twice the displacement");
         Check(worstSymmetry <= 1e-9 * Math.Abs(tip), "a symmetric load gives a symmetric shape");
+
+        // Stresses at the level-1 tessellation's vertices: twice the force, twice every stress.
+        StressSample[] s1 = Stresses(session, id, 1), s2 = Stresses(session, id, 2);
+        double worstStress = 0, largestStress = 0;
+        for (int k = 0; k < s1.Length; ++k)
+        {
+            largestStress = Math.Max(largestStress, s1[k].von_mises_top);
+            worstStress = Math.Max(worstStress, Math.Abs(s2[k].von_mises_top - 2 * s1[k].von_mises_top));
+        }
+        Check(s1.Length == (2 * N + 1) * (2 * N + 1) && s2.Length == s1.Length, "one stress sample per level-1 vertex");
+        Check(largestStress > 0 && worstStress <= 1e-9 * largestStress, "twice the force, twice the stress");
+        IntPtr noField;
+        Check(Native.ss_session_stresses(session, ref id, 99, 1, null, 0, 0.0, out noField) == Status.NotFound &&
+              noField == IntPtr.Zero, "stresses of an unknown result: not found");
 
         // Through the listener, as a second device: a remote session on the same server.
         RemoteOptions remoteOptions;

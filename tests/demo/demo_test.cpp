@@ -1,52 +1,114 @@
-// The demo's scripted session end to end (short): every layer working together.
+// The demo's scripted session end to end (short): every layer working together, on every shipped
+// mesh, honest about the linear model's range.
 #include "demo.h"
 
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "test_meshes.h"
+
 namespace softshell::demo {
 namespace {
 
-TEST(Demo, ShortSessionRunsEveryLayer) {
+DemoOptions short_options(const std::string& out) {
   DemoOptions options;
-  options.material = material_preset("aluminium", 0.002).value();
-  options.out_dir = std::filesystem::temp_directory_path() / "softshell-demo-test";
+  options.out_dir = std::filesystem::path(::testing::TempDir()) / out;
   std::filesystem::remove_all(options.out_dir);
-  options.deformations = 12;
-  options.bullet_steps = 60;
+  options.short_script = true;
   options.level = 2;
   options.picture_width = 160;
   options.picture_height = 120;
+  return options;
+}
+
+TEST(Demo, ShortSessionRunsEveryLayer) {
+  DemoOptions options = short_options("softshell-demo-test");
+  options.material = material_preset("aluminium", 0.002).value();
+  options.material_name = "aluminium";
   auto report = run_demo(options);
   ASSERT_TRUE(report.ok()) << report.error().message;
   EXPECT_EQ(report->server, "embedded");
-  EXPECT_GE(report->deformations, 12);
+  EXPECT_TRUE(report->precomputed_now);
   EXPECT_GT(report->precompute_ms, 0.0);
+  EXPECT_GE(report->deformations, 12);
+  EXPECT_EQ(report->probes, 5);  // one per phase: Bullet, grab, push, twist, two hands
   EXPECT_GT(report->latency_p50_ms, 0.0);
   EXPECT_LE(report->latency_p50_ms, report->latency_max_ms);
+  // spot stands on its four feet, +y up.
+  EXPECT_EQ(report->setup.up, 'y');
+  EXPECT_TRUE(report->setup.up_detected);
+  EXPECT_EQ(report->setup.resting_parts, 1);
+  EXPECT_GE(report->setup.floor_points, 3);
+  EXPECT_EQ(report->setup.pins, 0);
   // The follower ends with the master's last result.
   EXPECT_TRUE(report->follower.matches_master);
   EXPECT_EQ(report->follower.final_res_id, report->last_res_id);
   EXPECT_GE(report->follower.received, 1);
-  // Bullet bodies landed and dented the shell.
-  EXPECT_EQ(report->bullet.bodies, 3);
+  // Boxes landed on the back and dented it.
+  EXPECT_GE(report->bullet.bodies, 1);
+  EXPECT_EQ(report->bullet.on_shell, report->bullet.bodies);
   EXPECT_GT(report->bullet.contacts, 0);
   EXPECT_GT(report->bullet.max_deflection, 0.0);
-  EXPECT_GT(report->max_displacement, 0.0);
+  EXPECT_EQ(report->loads.box_masses.size(), static_cast<size_t>(report->bullet.bodies));
+  // Aluminium: the loads were scaled to stay below yield and in the linear range.
+  EXPECT_TRUE(report->warnings.empty()) << report->warnings.front();
+  EXPECT_FALSE(report->final.exceeds_yield);
+  EXPECT_GT(report->final.max_displacement, 0.0);
+  EXPECT_LT(report->final.max_displacement, 0.05 * report->setup.size);
+  ASSERT_TRUE(report->final.max_von_mises.has_value());
+  EXPECT_GT(*report->final.max_von_mises, 0.0);
+  double yield = 0.0;
+  for (const auto& preset : material_presets()) {
+    if (preset.name == "aluminium") yield = preset.yield_strength;
+  }
+  EXPECT_LE(*report->final.max_von_mises, 0.41 * yield);  // the script aims at 40% of yield at most
   for (const auto& path : report->outputs) EXPECT_TRUE(std::filesystem::exists(path)) << path;
-  EXPECT_EQ(report->outputs.size(), 7u);
+  // Two OBJs; before, bullet, push, after, follower, stress.
+  EXPECT_EQ(report->outputs.size(), 8u);
 
   // The --json line carries every documented field.
   const auto j = nlohmann::json::parse(format_json(*report));
-  for (const char* key : {"mesh", "server", "deformations", "precompute_ms", "latency_ms", "follower", "bullet", "outputs"}) {
+  for (const char* key : {"mesh", "server", "setup", "precompute_ms", "loads", "deformations", "latency_ms", "follower",
+                          "bullet", "final", "warnings", "notes", "outputs"}) {
     EXPECT_TRUE(j.contains(key)) << key;
   }
   EXPECT_EQ(j["follower"]["final_res_id"].get<uint32_t>(), report->last_res_id);
-  EXPECT_TRUE(j["latency_ms"].contains("p95"));
-  EXPECT_TRUE(j["bullet"].contains("max_deflection"));
+  EXPECT_DOUBLE_EQ(j["final"]["max_displacement"].get<double>(), report->final.max_displacement);
+  EXPECT_DOUBLE_EQ(j["final"]["max_von_mises"].get<double>(), *report->final.max_von_mises);
+  EXPECT_TRUE(j["warnings"].is_array());
   EXPECT_NE(format_summary(*report).find("follower"), std::string::npos);
+}
+
+// Loads past the scaled ones leave the linear range, and the report says so and what to do.
+TEST(Demo, LoadsBeyondTheLinearRangeAreWarnedAbout) {
+  DemoOptions options = short_options("softshell-demo-range");
+  options.load_scale = 40.0;
+  options.bullet = false;
+  options.follower = false;
+  options.pictures = false;
+  auto report = run_demo(options);
+  ASSERT_TRUE(report.ok()) << report.error().message;
+  ASSERT_FALSE(report->warnings.empty());
+  for (const auto& w : report->warnings) {
+    EXPECT_NE(w.find("--load-scale"), std::string::npos) << w;
+  }
+  // Rubber at 40 times the aims: the strain check speaks, and names the nonlinear model.
+  const auto mentions = [&](const char* text) {
+    return std::any_of(report->warnings.begin(), report->warnings.end(),
+                       [&](const std::string& w) { return w.find(text) != std::string::npos; });
+  };
+  EXPECT_TRUE(mentions("strains reach")) << report->warnings.front();
+  EXPECT_TRUE(mentions("--model nonlinear"));
 }
 
 TEST(Demo, BadInputIsAnErrorNotACrash) {
@@ -55,9 +117,196 @@ TEST(Demo, BadInputIsAnErrorNotACrash) {
   auto report = run_demo(options);
   ASSERT_FALSE(report.ok());
   EXPECT_EQ(report.error().code, ErrorCode::kIoError);
+  options.mesh = ::testing::TempDir();
+  report = run_demo(options);
+  ASSERT_FALSE(report.ok());
+  EXPECT_NE(report.error().message.find("is a directory"), std::string::npos) << report.error().message;
+  // A single quad: too coarse to hold and turn a point of; refused up front, saying what to do.
+  const auto quad = std::filesystem::path(::testing::TempDir()) / "softshell-demo-quad.obj";
+  std::ofstream(quad) << "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 4 3 2\n";
+  options.mesh = quad;
+  report = run_demo(options);
+  ASSERT_FALSE(report.ok());
+  EXPECT_EQ(report.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(report.error().message.find("subdivide it once"), std::string::npos) << report.error().message;
   options.mesh.clear();
   options.deformations = 3;
   EXPECT_EQ(run_demo(options).error().code, ErrorCode::kInvalidArgument);
+}
+
+// --- the program itself -----------------------------------------------------------------------
+
+struct ProgramRun {
+  int status = -1;
+  std::string out, err;
+  nlohmann::json json;  // the last line of stdout, if it is JSON
+};
+
+// Runs softshell-demo with `args` (a shell word list), capturing both streams.
+ProgramRun run_program(const std::string& args, const std::string& name) {
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / ("softshell-demo-cli-" + name);
+  std::filesystem::create_directories(dir);
+  const std::string command = "env -u SOFTSHELL_SERVER '" SOFTSHELL_DEMO_EXE "' " + args + " > '" + (dir / "out").string() +
+                              "' 2> '" + (dir / "err").string() + "'";
+  ProgramRun r;
+  const int raw = std::system(command.c_str());
+  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  const auto slurp = [](const std::filesystem::path& p) {
+    std::ifstream f(p);
+    std::stringstream s;
+    s << f.rdbuf();
+    return s.str();
+  };
+  r.out = slurp(dir / "out");
+  r.err = slurp(dir / "err");
+  const auto last = r.out.rfind("\n{");
+  const std::string line = r.out.substr(last == std::string::npos ? 0 : last + 1);
+  if (!line.empty() && line[0] == '{') r.json = nlohmann::json::parse(line, nullptr, false);
+  return r;
+}
+
+// Every shipped mesh: the script adapts to it (up axis, supports, reach, loads) and answers
+// inside the linear range, or warns.
+class DemoOnMesh : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(DemoOnMesh, RunsAndReportsHonestly) {
+  const std::string name = GetParam();
+  const std::string out = (std::filesystem::path(::testing::TempDir()) / ("softshell-demo-" + name)).string();
+  const ProgramRun r = run_program("--mesh='" + test::asset_path("meshes/" + name).string() + "' --short --level=2 --no-pictures --json " +
+                                "--quiet --out='" + out + "'",
+                            name);
+  ASSERT_EQ(r.status, 0) << r.err << r.out;
+  ASSERT_TRUE(r.json.is_object()) << r.out;
+  const auto& j = r.json;
+  const double size = j["setup"]["size"].get<double>();
+  const auto& final = j["final"];
+  const double u = final["max_displacement"].get<double>();
+  EXPECT_TRUE(std::isfinite(u) && u > 0.0) << u;
+  EXPECT_TRUE(std::isfinite(final["max_rotation"].get<double>()));
+  ASSERT_TRUE(final["max_von_mises"].is_number()) << "the embedded server has stresses";
+  EXPECT_TRUE(std::isfinite(final["max_von_mises"].get<double>()));
+  EXPECT_GT(final["max_von_mises"].get<double>(), 0.0);
+  // Small against the object, unless a warning says otherwise (none does at the script's loads).
+  EXPECT_TRUE(j["warnings"].empty()) << j["warnings"].dump();
+  if (j["warnings"].empty()) {
+    EXPECT_LT(u, 0.05 * size) << name;
+  }
+  EXPECT_TRUE(j["follower"]["matches_master"].get<bool>());
+  // Held: on the floor, by pins, or fixed; never left free (the server would have refused).
+  EXPECT_GT(j["setup"]["floor_points"].get<int>() + j["setup"]["pins"].get<int>() +
+                (j["setup"]["supports"].get<std::string>().find("fixed") != std::string::npos),
+            0);
+}
+
+INSTANTIATE_TEST_SUITE_P(ShippedMeshes, DemoOnMesh, ::testing::ValuesIn(test::asset_mesh_names()),
+                         [](const ::testing::TestParamInfo<std::string>& p) { return p.param.substr(0, p.param.find('.')); });
+
+// Up axes that a person sees at a glance: OpenSubdiv's chess pieces and tent are z-up, the torus
+// and spot y-up; the car rests on its body (z), the thin hand lies flat (z).
+TEST(DemoProgram, DetectsTheUpAxisAndTakesAnOverride) {
+  for (const auto& [mesh, up] : {std::pair{"catmark_pawn.obj", "z"}, std::pair{"catmark_tent.obj", "z"},
+                                 std::pair{"catmark_torus.obj", "y"}, std::pair{"catmark_righthanded.obj", "z"}}) {
+    const ProgramRun r = run_program("--mesh '" + test::asset_path(std::string("meshes/") + mesh).string() +
+                                  "' --short --level 1 --no-bullet --no-follower --no-pictures --json --quiet --out '" +
+                                  ::testing::TempDir() + "/softshell-demo-up'",
+                              "up");
+    ASSERT_EQ(r.status, 0) << mesh << r.err;
+    EXPECT_EQ(r.json["setup"]["up"], up) << mesh;
+    EXPECT_TRUE(r.json["setup"]["up_detected"].get<bool>());
+  }
+  const ProgramRun forced = run_program("--mesh '" + test::asset_path("meshes/catmark_torus.obj").string() +
+                                     "' --up=x --short --level 1 --no-bullet --no-follower --no-pictures --json --quiet --out '" +
+                                     ::testing::TempDir() + "/softshell-demo-up'",
+                                 "up-forced");
+  ASSERT_EQ(forced.status, 0) << forced.err;
+  EXPECT_EQ(forced.json["setup"]["up"], "x");
+  EXPECT_FALSE(forced.json["setup"]["up_detected"].get<bool>());
+}
+
+// A softshell-server on a free port, for as long as the object lives.
+class ServerProcess {
+ public:
+  ServerProcess() {
+    int out[2];
+    if (pipe(out) != 0) throw std::runtime_error("pipe failed");
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(out[1], 1);
+      close(out[0]);
+      execl(SOFTSHELL_SERVER_EXE, SOFTSHELL_SERVER_EXE, "--port=0", "--log-level=warning", static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    close(out[1]);
+    std::string line;
+    char c = 0;
+    while (read(out[0], &c, 1) == 1 && c != '\n') line += c;
+    close(out[0]);
+    url_ = line.find("http://") == std::string::npos ? line : line.substr(line.find("http://"));
+  }
+  ~ServerProcess() {
+    kill(pid_, SIGTERM);
+    waitpid(pid_, nullptr, 0);
+  }
+  const std::string& url() const { return url_; }
+
+ private:
+  pid_t pid_ = -1;
+  std::string url_;
+};
+
+// --server: the same session against a separate server. Its stresses come from the server if it
+// offers them, and the report says so if it does not; the second run finds the geometry there
+// already and says that nothing was precomputed.
+TEST(DemoProgram, AgainstARunningServer) {
+  ServerProcess server;
+  ASSERT_EQ(server.url().rfind("http://127.0.0.1:", 0), 0u) << server.url();
+  const std::string args = "--server " + server.url() + " --short --level 1 --no-pictures --json --quiet --out '" +
+                           ::testing::TempDir() + "/softshell-demo-remote'";
+  const ProgramRun first = run_program(args, "remote-1");
+  ASSERT_EQ(first.status, 0) << first.err << first.out;
+  EXPECT_EQ(first.json["server"], "remote");
+  EXPECT_TRUE(first.json["precomputed_now"].get<bool>());
+  const auto& vm = first.json["final"]["max_von_mises"];
+  if (vm.is_null()) {
+    EXPECT_NE(first.json["notes"].dump().find("stresses are unavailable"), std::string::npos) << first.json["notes"].dump();
+  } else {
+    EXPECT_TRUE(std::isfinite(vm.get<double>()));
+  }
+  EXPECT_TRUE(first.json["warnings"].empty()) << first.json["warnings"].dump();
+
+  const ProgramRun second = run_program(args, "remote-2");
+  ASSERT_EQ(second.status, 0) << second.err;
+  EXPECT_FALSE(second.json["precomputed_now"].get<bool>());
+  EXPECT_TRUE(second.json["precompute_ms"].is_null());
+  EXPECT_NE(second.out.find("precompute           none: the server already held this geometry"), std::string::npos)
+      << second.out;
+  EXPECT_EQ(second.out.find("paper Table 1"), std::string::npos);
+}
+
+TEST(DemoProgram, OptionsVersionAndMessages) {
+  const ProgramRun version = run_program("--version", "version");
+  EXPECT_EQ(version.status, 0);
+  EXPECT_EQ(version.out.rfind(std::string("softshell-demo ") + SOFTSHELL_VERSION_STRING, 0), 0u) << version.out;
+  const ProgramRun help = run_program("--help", "help");
+  EXPECT_EQ(help.status, 0);
+  for (const char* option : {"--mesh", "--material", "--thickness", "--server", "--out", "--level", "--deformations", "--up",
+                             "--short", "--load-scale", "--no-bullet", "--no-follower", "--no-pictures", "--quiet", "--json"}) {
+    EXPECT_NE(help.out.find(option), std::string::npos) << option;
+  }
+  const ProgramRun bad_up = run_program("--up w", "bad-up");
+  EXPECT_EQ(bad_up.status, 2);
+  EXPECT_NE(bad_up.err.find("--up"), std::string::npos) << bad_up.err;
+  EXPECT_EQ(run_program("--level=9", "bad-level").status, 2);
+  EXPECT_EQ(run_program("--frobnicate", "unknown").status, 2);
+  EXPECT_EQ(run_program("--material=unobtainium", "bad-material").status, 2);
+  const ProgramRun directory = run_program("--mesh='" + ::testing::TempDir() + "' --quiet", "directory");
+  EXPECT_EQ(directory.status, 1);
+  EXPECT_NE(directory.err.find("is a directory"), std::string::npos) << directory.err;
+  // Nothing listens on port 1.
+  const ProgramRun refused = run_program("--server=http://127.0.0.1:1 --quiet", "refused");
+  EXPECT_EQ(refused.status, 1);
+  EXPECT_NE(refused.err.find("connection refused: is softshell-server running at http://127.0.0.1:1?"), std::string::npos)
+      << refused.err;
 }
 
 }  // namespace

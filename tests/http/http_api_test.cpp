@@ -35,8 +35,12 @@ TEST(HttpApiTest, HealthAndMetrics) {
   auto c = server.client();
   Reply h = get(*c, "/health");
   EXPECT_EQ(h.status, 200);
-  EXPECT_EQ(h.body, R"({"status":"ok"})");
+  EXPECT_EQ(h.body, std::string(R"({"status":"ok","version":")") + SOFTSHELL_VERSION_STRING + "\"}");
   EXPECT_EQ(h.content_type, kJson);
+  EXPECT_EQ(h.server, std::string("softshell/") + SOFTSHELL_VERSION_STRING);
+  Reply unrouted = get(*c, "/nowhere");  // error pages carry it too
+  EXPECT_EQ(unrouted.status, 404);
+  EXPECT_EQ(unrouted.server, std::string("softshell/") + SOFTSHELL_VERSION_STRING);
   upload_ready(server);
   Reply m = get(*c, "/metrics");
   EXPECT_EQ(m.status, 200);
@@ -176,6 +180,38 @@ TEST(HttpApiTest, DeformationsResultsAndHistoryBothFormats) {
   auto decoded = wire::decode_request_json(req3.body).value();
   EXPECT_EQ(decoded.forces[0].force, Vec3(0, 0, -0.5));
   EXPECT_EQ(decoded.vertex_constraints.size(), 4u);
+}
+
+// The nonlinear model over HTTP (PROTOCOL.md): the JSON field, or model=nonlinear with either
+// body layout; the answer says which model and how Newton went; a query that contradicts the body
+// or names no model is a 400. (Its accuracy is the engine's tests'.)
+TEST(HttpApiTest, NonlinearModelByFieldOrQueryParameter) {
+  TestServer server;
+  auto c = server.client();
+  const std::string id = upload_ready(server);
+  const std::string base = "/geometries/" + id;
+  DeformationRequest nonlinear = pinned_push(1);
+  nonlinear.model = DeformationModel::kNonlinear;
+
+  Reply by_field = post(*c, base + "/results", wire::encode_request_json(nonlinear), kJson);
+  ASSERT_EQ(by_field.status, 200) << by_field.body;
+  const DeformationResult field_result = wire::decode_result_json(by_field.body, 25).value();
+  EXPECT_EQ(field_result.model, DeformationModel::kNonlinear);
+  EXPECT_GE(field_result.iterations, 1);
+  EXPECT_NE(by_field.body.find("\"model\":\"nonlinear\""), std::string::npos) << by_field.body;
+
+  Reply by_query = post(*c, base + "/results?model=nonlinear", wire::encode_request_binary(pinned_push(1)).value(), kBin,
+                        kJson);
+  ASSERT_EQ(by_query.status, 200) << by_query.body;
+  const DeformationResult query_result = wire::decode_result_json(by_query.body, 25).value();
+  EXPECT_EQ(query_result.model, DeformationModel::kNonlinear);
+  for (size_t i = 0; i < 25; ++i) EXPECT_LT((query_result.positions[i] - field_result.positions[i]).norm(), 1e-6);
+
+  Reply linear = post(*c, base + "/results?model=linear", wire::encode_request_json(pinned_push(1)), kJson);
+  ASSERT_EQ(linear.status, 200) << linear.body;
+  EXPECT_EQ(linear.body.find("\"model\""), std::string::npos);  // linear answers keep the version 1 layout
+  EXPECT_EQ(post(*c, base + "/results?model=linear", wire::encode_request_json(nonlinear), kJson).status, 400);
+  EXPECT_EQ(post(*c, base + "/results?model=quadratic", wire::encode_request_json(pinned_push(1)), kJson).status, 400);
 }
 
 TEST(HttpApiTest, LatestResultLongPoll) {

@@ -224,6 +224,9 @@ TEST(HttpConcurrencyTest, RemoteSessionErrorsAreValues) {
   options.connect_timeout = Ms(500);
   RemoteSession session("http://127.0.0.1:" + std::to_string(port), options);
   EXPECT_EQ(session.health().error().code, ErrorCode::kUnavailable);
+  // The message says what to check, not httplib's name for the failure ("Connection").
+  EXPECT_EQ(session.health().error().message,
+            "connection refused: is softshell-server running at http://127.0.0.1:" + std::to_string(port) + "?");
   EXPECT_EQ(session.upload(exact_grid(), exact_material()).error().code, ErrorCode::kUnavailable);
   auto async = session.deform_async(GeomId{}, pinned_push(1));
   EXPECT_EQ(async.get().error().code, ErrorCode::kUnavailable);

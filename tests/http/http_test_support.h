@@ -78,6 +78,7 @@ struct Reply {
   int status = 0;
   std::string body;
   std::string content_type;
+  std::string server;  // the Server header
 };
 
 inline Reply to_reply(const httplib::Result& r) {
@@ -85,7 +86,7 @@ inline Reply to_reply(const httplib::Result& r) {
     ADD_FAILURE() << "no HTTP answer: " << httplib::to_string(r.error());
     return {};
   }
-  return {r->status, r->body, r->get_header_value("Content-Type")};
+  return {r->status, r->body, r->get_header_value("Content-Type"), r->get_header_value("Server")};
 }
 
 inline Reply post(httplib::Client& c, const std::string& path, const std::string& body, const std::string& type,

@@ -21,7 +21,7 @@ using namespace test;
 // A child process with its stdout and stderr captured.
 class Child {
  public:
-  explicit Child(std::vector<std::string> args) {
+  explicit Child(std::vector<std::string> args, const std::vector<std::pair<std::string, std::string>>& env = {}) {
     int out[2], err[2];
     if (pipe(out) != 0 || pipe(err) != 0) throw std::runtime_error("pipe failed");
     pid_ = fork();
@@ -30,6 +30,7 @@ class Child {
       dup2(err[1], 2);
       close(out[0]);
       close(err[0]);
+      for (const auto& [name, value] : env) setenv(name.c_str(), value.c_str(), 1);
       std::vector<char*> argv;
       for (auto& a : args) argv.push_back(a.data());
       argv.push_back(nullptr);
@@ -143,6 +144,49 @@ TEST(ServerAppTest, HelpAndBadOptions) {
   EXPECT_NE(bad.drain_stderr().find("--port"), std::string::npos);
   Child unknown({SOFTSHELL_SERVER_EXE, "--frobnicate"});
   EXPECT_EQ(unknown.wait(std::chrono::seconds(10)), 2);
+}
+
+// CLI11: --opt=value as well as --opt value, --version, SOFTSHELL_* environment variables (the
+// command line wins), help that names each variable.
+TEST(ServerAppTest, OptionFormsVersionAndEnvironment) {
+  Child version({SOFTSHELL_SERVER_EXE, "--version"});
+  const std::string v = version.read_until("\n", std::chrono::seconds(10));
+  EXPECT_EQ(version.wait(std::chrono::seconds(10)), 0);
+  EXPECT_EQ(v.rfind(std::string("softshell-server ") + SOFTSHELL_VERSION_STRING, 0), 0u) << v;
+
+  Child help({SOFTSHELL_SERVER_EXE, "--help"});
+  const std::string text = help.read_until("SOFTSHELL_LOG_LEVEL", std::chrono::seconds(10));
+  EXPECT_EQ(help.wait(std::chrono::seconds(10)), 0);
+  for (const char* env : {"SOFTSHELL_HOST", "SOFTSHELL_PORT", "SOFTSHELL_THREADS", "SOFTSHELL_SOLVE_THREADS",
+                          "SOFTSHELL_PRECOMPUTE_JOBS", "SOFTSHELL_CACHE_MB", "SOFTSHELL_STORE_MB", "SOFTSHELL_MAX_BODY_MB",
+                          "SOFTSHELL_MAX_CONNECTIONS", "SOFTSHELL_EVENT_WRITERS", "SOFTSHELL_LOG_LEVEL"}) {
+    EXPECT_NE(text.find(env), std::string::npos) << env;
+  }
+
+  // --opt=value; the port and the body limit from the environment.
+  Child server({SOFTSHELL_SERVER_EXE, "--host=127.0.0.1", "--threads=1", "--log-level=warning"},
+               {{"SOFTSHELL_PORT", "0"}, {"SOFTSHELL_MAX_BODY_MB", "1"}, {"SOFTSHELL_CACHE_MB", "64"}});
+  const std::string out = server.read_until("\n", std::chrono::seconds(30));
+  ASSERT_NE(out.find("softshell-server listening on http://127.0.0.1:"), std::string::npos) << out;
+  const int port = port_of(out.substr(0, out.find('\n')));
+  ASSERT_GT(port, 0);  // 0 came from SOFTSHELL_PORT: a free port, not 8080
+  {
+    httplib::Client c("127.0.0.1", port);
+    auto big = c.Post("/geometries", std::string((1 << 20) + 10, 'x'), kBin);
+    ASSERT_TRUE(big);
+    EXPECT_EQ(big->status, 413);  // SOFTSHELL_MAX_BODY_MB=1
+  }
+  kill(server.pid(), SIGTERM);
+  EXPECT_EQ(server.wait(std::chrono::seconds(15)), 0);
+  // --log-level=warning: no per-request info lines.
+  EXPECT_EQ(server.drain_stderr().find("POST /geometries 413"), std::string::npos);
+
+  // A bad value from the environment is refused like one on the command line.
+  Child bad({SOFTSHELL_SERVER_EXE}, {{"SOFTSHELL_PORT", "99999"}});
+  EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
+  EXPECT_NE(bad.drain_stderr().find("--port"), std::string::npos);
+  Child level({SOFTSHELL_SERVER_EXE, "--log-level=loud"});
+  EXPECT_EQ(level.wait(std::chrono::seconds(10)), 2);
 }
 
 TEST(ServerAppTest, BusyPortIsAnError) {

@@ -259,6 +259,57 @@ int main(void) {
   CHECK_OK(ss_session_latest_result(session, &id, 2, 0, &has_new, &res_id, deformed, NV, &count));
   CHECK(has_new == 0);
 
+  /* Stresses of result 2: at the level-1 tessellation's vertices, then at those samples' own
+   * points (the same numbers both ways), a yield strength flagging or not, and bad queries. */
+  ss_stress_field* field = NULL;
+  CHECK_OK(ss_session_stresses(session, &id, 2, 1, NULL, 0, 1.0, &field));
+  int32_t num_samples = 0;
+  CHECK_OK(ss_stress_field_samples(field, NULL, 0, &num_samples));
+  CHECK(num_samples == (2 * N + 1) * (2 * N + 1)); /* a level-1 tessellation of the N x N plate */
+  ss_stress_sample* samples = (ss_stress_sample*)calloc((size_t)num_samples, sizeof(ss_stress_sample));
+  ss_stress_sample* stress_again = (ss_stress_sample*)calloc((size_t)num_samples, sizeof(ss_stress_sample));
+  ss_surface_point* where = (ss_surface_point*)calloc((size_t)num_samples, sizeof(ss_surface_point));
+  CHECK(samples != NULL && stress_again != NULL && where != NULL);
+  if (samples && stress_again && where) {
+    CHECK_OK(ss_stress_field_samples(field, samples, num_samples, &count));
+    CHECK_STATUS(ss_stress_field_samples(field, samples, num_samples - 1, &count), SS_BUFFER_TOO_SMALL);
+    ss_stress_sample peak, peak_again;
+    int32_t exceeds = -1;
+    CHECK_OK(ss_stress_field_max(field, &peak, &exceeds));
+    CHECK(exceeds == 1 && peak.von_mises_top > 1.0); /* 1 Pa: everything that bends yields */
+    double largest = 0.0;
+    for (int32_t k = 0; k < num_samples; ++k) {
+      largest = fmax(largest, fmax(samples[k].von_mises_top, samples[k].von_mises_bottom));
+      where[k] = samples[k].point;
+    }
+    CHECK(largest > 0.0);
+    ss_stress_field* at_points = NULL;
+    CHECK_OK(ss_session_stresses(session, &id, 2, 0, where, num_samples, 1e12, &at_points));
+    CHECK_OK(ss_stress_field_samples(at_points, stress_again, num_samples, &count));
+    CHECK(count == num_samples);
+    double worst = 0.0;
+    for (int32_t k = 0; k < num_samples; ++k) {
+      worst = fmax(worst, fabs(stress_again[k].von_mises_top - samples[k].von_mises_top) / largest);
+      worst = fmax(worst, fabs(stress_again[k].von_mises_bottom - samples[k].von_mises_bottom) / largest);
+    }
+    CHECK(worst < 1e-12);
+    CHECK_OK(ss_stress_field_max(at_points, &peak_again, &exceeds));
+    CHECK(exceeds == 0 && fabs(peak_again.von_mises_top - peak.von_mises_top) <= 1e-12 * peak.von_mises_top);
+    ss_stress_field_destroy(at_points);
+  }
+  free(samples);
+  free(stress_again);
+  free(where);
+  ss_stress_field* no_field = NULL;
+  CHECK_STATUS(ss_session_stresses(session, &id, 2, 5, NULL, 0, 0.0, &no_field), SS_INVALID_ARGUMENT);
+  CHECK_STATUS(ss_session_stresses(session, &id, 2, 0, NULL, 0, 0.0, &no_field), SS_INVALID_ARGUMENT);
+  CHECK_STATUS(ss_session_stresses(session, &id, 2, 1, NULL, 0, NAN, &no_field), SS_INVALID_ARGUMENT);
+  CHECK_STATUS(ss_session_stresses(session, &id, 99, 1, NULL, 0, 0.0, &no_field), SS_NOT_FOUND);
+  CHECK(no_field == NULL);
+  ss_stress_field_destroy(field);
+  ss_stress_sample unused;
+  CHECK_STATUS(ss_stress_field_max(field, &unused, NULL), SS_INVALID_ARGUMENT); /* a destroyed handle */
+
   /* A request that leaves the plate free to move: the server's error comes back as a status. */
   ss_request* free_plate = NULL;
   CHECK_OK(ss_request_create(&free_plate));

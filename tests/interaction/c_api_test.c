@@ -1,6 +1,7 @@
 /* The C ABI from plain C11: everything that does not need a server (version, generation-checked
  * handles, the log callback, materials, meshes, limit evaluation, tessellation, picking, requests,
- * grab, floor, levels of detail, the error and buffer conventions). The whole-session test is c_api_session_test.c. */
+ * grab, floor, levels of detail, the error and buffer conventions). The whole-session test is
+ * c_api_session_test.c. (Long: plain C has no test framework; one file keeps its few helpers.) */
 
 #include <math.h>
 #include <stdint.h>

@@ -1,13 +1,32 @@
 #include "softshell/limit_evaluator.h"
 
+#include <algorithm>
+#include <map>
+#include <memory>
 #include <random>
 
 #include <gtest/gtest.h>
+#include <opensubdiv/bfr/refinerSurfaceFactory.h>
+#include <opensubdiv/far/primvarRefiner.h>
+#include <opensubdiv/far/topologyDescriptor.h>
 
+#include "shell_benchmarks.h"
 #include "test_meshes.h"
 
 namespace softshell {
 namespace {
+
+namespace Bfr = OpenSubdiv::Bfr;
+namespace Far = OpenSubdiv::Far;
+
+// A point for Far::PrimvarRefiner.
+struct Point3 {
+  Vec3 v = Vec3::Zero();
+  Point3() = default;
+  Point3(const Vec3& x) : v(x) {}  // NOLINT(google-explicit-constructor)
+  void Clear() { v.setZero(); }
+  void AddWithWeight(const Point3& src, double weight) { v += weight * src.v; }
+};
 
 double sum(const std::vector<double>& w) {
   double s = 0.0;
@@ -238,6 +257,294 @@ TEST(LimitEvaluator, FaceStencilsMatchSingleStencils) {
       ASSERT_LT(col, static_cast<long>(indices.size()));
       EXPECT_NEAR(w(static_cast<long>(6 * i), col), st.position[k], 1e-15);
       EXPECT_NEAR(w(static_cast<long>(6 * i + 4), col), st.duv[k], 1e-13);
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Exact evaluation at extraordinary vertices, against OpenSubdiv where OpenSubdiv is exact.
+
+// OpenSubdiv's own objects for a mesh (the same options as the evaluator's).
+struct Osd {
+  std::unique_ptr<Far::TopologyRefiner> refiner;
+  explicit Osd(const ControlMesh& mesh) {
+    const std::vector<int32_t> sizes = mesh.face_sizes();
+    Far::TopologyDescriptor desc;
+    desc.numVertices = mesh.num_vertices();
+    desc.numFaces = mesh.num_faces();
+    desc.numVertsPerFace = sizes.data();
+    desc.vertIndicesPerFace = mesh.face_indices().data();
+    OpenSubdiv::Sdc::Options sdc;
+    sdc.SetVtxBoundaryInterpolation(mesh.boundary() == BoundaryMode::kNone
+                                        ? OpenSubdiv::Sdc::Options::VTX_BOUNDARY_NONE
+                                        : OpenSubdiv::Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER);
+    refiner.reset(Far::TopologyRefinerFactory<Far::TopologyDescriptor>::Create(
+        desc, Far::TopologyRefinerFactory<Far::TopologyDescriptor>::Options(OpenSubdiv::Sdc::SCHEME_CATMARK, sdc)));
+  }
+};
+
+// The meshes with extraordinary vertices: inside and on the boundary, n-gons, a ghost layer.
+std::vector<std::pair<std::string, ControlMesh>> ev_meshes() {
+  std::vector<std::pair<std::string, ControlMesh>> out;
+  for (const char* name : {"catmark_nonquads.obj", "catmark_gregory_test5.obj", "catmark_cube.obj", "spot_control_mesh.obj",
+                           "blub_control_mesh.obj"}) {
+    ControlMesh mesh = test::load_asset_mesh(name);
+    mesh.creases().clear();
+    mesh.corners().clear();
+    out.emplace_back(name, mesh);
+  }
+  out.emplace_back("fan of valence 7", test::fan_plate(7, 3));
+  out.emplace_back("fan of valence 12", test::fan_plate(12, 2));
+  out.emplace_back("boundary fan of 5 faces", test::fan_plate(6, 2, 5));
+  out.emplace_back("boundary fan of 8 faces", test::fan_plate(10, 2, 8));
+  ControlMesh ghost = test::make_ev_plate(8, 1.0).mesh;
+  ghost.set_boundary(BoundaryMode::kNone);
+  out.emplace_back("plate with a ghost layer", ghost);
+  for (auto& [name, mesh] : out) {
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> uni(-0.1, 0.1);
+    for (Vec3& p : mesh.positions()) p += Vec3(uni(rng), uni(rng), uni(rng));  // generic geometry
+  }
+  return out;
+}
+
+// Where Bfr's patch tree consists of exact B-spline patches (away from the extraordinary
+// corners, which it approximates within 2^-6 or so), the exact evaluation must be the same.
+TEST(LimitEvaluator, ExactEvaluationAgreesWithBfrWhereBfrIsExact) {
+  std::mt19937 rng(17);
+  for (const auto& [name, mesh] : ev_meshes()) {
+    auto ev = LimitEvaluator::create(mesh).value();
+    Osd osd(mesh);
+    Bfr::SurfaceFactory::Options options;
+    options.SetApproxLevelSmooth(10);
+    Bfr::RefinerSurfaceFactory<> factory(*osd.refiner, options);
+    const double size = mesh.bounding_diagonal();
+    int checked = 0;
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+      if (!ev.has_limit_surface(f) || ev.is_regular(f)) continue;  // regular faces are Bfr themselves
+      Bfr::Surface<double> surface;
+      ASSERT_TRUE(factory.InitVertexSurface(f, &surface));
+      std::vector<double> patch(3 * static_cast<size_t>(surface.GetNumPatchPoints()));
+      const Bfr::Surface<double>::PointDescriptor desc(3);
+      surface.PreparePatchPoints(mesh.positions().front().data(), desc, patch.data(), desc);
+      const Bfr::Parameterization param = surface.GetParameterization();
+      double scale = 1.0;  // Bfr's sub-face coordinates are scaled
+      if (param.HasSubFaces()) {
+        const double a[2] = {0.0, 0.0}, b[2] = {1.0, 0.0};
+        double ua[2], ub[2];
+        param.ConvertNormalizedSubFaceToCoord(0, a, ua);
+        param.ConvertNormalizedSubFaceToCoord(0, b, ub);
+        scale = ub[0] - ua[0];
+      }
+      std::uniform_real_distribution<double> uni(0.05, 0.95);
+      for (int32_t s = 0; s < ev.num_subfaces(f); ++s) {
+        for (int k = 0; k < 6; ++k) {
+          const double uv[2] = {uni(rng), uni(rng)};
+          double bfr_uv[2] = {uv[0], uv[1]};
+          if (param.HasSubFaces()) param.ConvertNormalizedSubFaceToCoord(s, uv, bfr_uv);
+          double p[3], du[3], dv[3], duu[3], duv[3], dvv[3];
+          surface.Evaluate(bfr_uv, patch.data(), desc, p, du, dv, duu, duv, dvv);
+          const LimitSample x = ev.evaluate({f, s, uv[0], uv[1]});
+          EXPECT_LT((x.position - Vec3(p[0], p[1], p[2])).norm(), 1e-12 * size) << name << " face " << f;
+          EXPECT_LT((x.du - scale * Vec3(du[0], du[1], du[2])).norm(), 1e-11 * size) << name << " face " << f;
+          EXPECT_LT((x.dv - scale * Vec3(dv[0], dv[1], dv[2])).norm(), 1e-11 * size) << name << " face " << f;
+          EXPECT_LT((x.duv - scale * scale * Vec3(duv[0], duv[1], duv[2])).norm(), 1e-10 * size) << name << " face " << f;
+          ++checked;
+        }
+      }
+    }
+    EXPECT_GT(checked, 0) << name;
+  }
+}
+
+// At every control point the limit position is Far::PrimvarRefiner's limit (OpenSubdiv's limit
+// masks, exact at extraordinary vertices too; taken after one refinement, as Far's Catmull-Clark
+// masks assume quads around the vertex).
+TEST(LimitEvaluator, LimitPositionsAtVerticesAreOpenSubdivsLimit) {
+  for (const auto& [name, mesh] : ev_meshes()) {
+    if (mesh.boundary() == BoundaryMode::kNone) continue;  // Far has no limit for the ghost layer's points
+    auto ev = LimitEvaluator::create(mesh).value();
+    Osd osd(mesh);
+    Far::TopologyRefiner::UniformOptions uniform(1);
+    uniform.fullTopologyInLastLevel = true;
+    osd.refiner->RefineUniform(uniform);
+    std::vector<Point3> src(mesh.positions().begin(), mesh.positions().end());
+    std::vector<Point3> level1(static_cast<size_t>(osd.refiner->GetLevel(1).GetNumVertices())), limit(level1.size());
+    Far::PrimvarRefinerReal<double> primvar(*osd.refiner);
+    primvar.Interpolate(1, src, level1);
+    primvar.Limit(level1, limit);
+    const double size = mesh.bounding_diagonal();
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+      auto fv = mesh.face(f);
+      for (size_t c = 0; c < fv.size(); ++c) {
+        // Corner c: (0, 0) of sub-face c of an n-gon; corner c of a quad.
+        static constexpr double kCorner[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+        const SurfacePoint p = fv.size() == 4 ? SurfacePoint{f, 0, kCorner[c][0], kCorner[c][1]}
+                                              : SurfacePoint{f, static_cast<int32_t>(c), 0.0, 0.0};
+        const Vec3 x = ev.evaluate(p).position;
+        const auto child = static_cast<size_t>(osd.refiner->GetLevel(0).GetVertexChildVertex(fv[c]));
+        EXPECT_LT((x - limit[child].v).norm(), 1e-12 * size) << name << " vertex " << fv[c];
+      }
+    }
+  }
+}
+
+// The derivative weights are the derivatives of the position weights, arbitrarily close to an
+// extraordinary vertex: five-point differences (exact for the cubics inside one ring's patch)
+// at points 2^-n from the vertex.
+TEST(LimitEvaluator, DerivativeWeightsAreDerivativesOfPositionWeightsNearExtraordinaryVertices) {
+  auto weights_at = [](const LimitEvaluator& ev, SurfacePoint p, int which) {
+    const LimitStencil st = ev.stencil(p);
+    const std::vector<double>* rows[6] = {&st.position, &st.du, &st.dv, &st.duu, &st.duv, &st.dvv};
+    return Eigen::Map<const Eigen::VectorXd>(rows[which]->data(), static_cast<Eigen::Index>(rows[which]->size())).eval();
+  };
+  int checked = 0;
+  for (const auto& [name, mesh] : ev_meshes()) {
+    auto ev = LimitEvaluator::create(mesh).value();
+    std::vector<double> factors;
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+      for (int32_t s = 0; s < ev.num_subfaces(f); ++s) {
+        for (int corner = 0; corner < 4; ++corner) {
+          if (!ev.ev_corner_weights(f, s, corner, 0.25, 2, factors)) continue;  // not an EV corner
+          const double cu = (corner == 1 || corner == 2) ? 1.0 : 0.0, cv = corner >= 2 ? 1.0 : 0.0;
+          for (int n : {2, 5, 13, 20}) {  // 2^-13 ~ 1e-4, 2^-20 ~ 1e-6
+            const double r = std::ldexp(1.0, -n);
+            // Inside one ring's patch (1.3 r, 0.4 r from the corner) and steps that stay there.
+            const double du0 = 1.3 * r, dv0 = 0.4 * r, h = 0.02 * r;
+            auto at = [&](double a, double b) {
+              return SurfacePoint{f, s, cu == 0.0 ? a : 1.0 - a, cv == 0.0 ? b : 1.0 - b};
+            };
+            const double su = cu == 0.0 ? 1.0 : -1.0, sv = cv == 0.0 ? 1.0 : -1.0;
+            for (int dir = 0; dir < 2; ++dir) {
+              auto shifted = [&](double k) { return dir == 0 ? at(du0 + k * h, dv0) : at(du0, dv0 + k * h); };
+              const double sign = dir == 0 ? su : sv;
+              for (int order = 0; order < 2; ++order) {  // first derivatives of N, then of N_u / N_v
+                const int value = order == 0 ? 0 : 1 + dir, derivative = order == 0 ? 1 + dir : (dir == 0 ? 3 : 5);
+                const Eigen::VectorXd fd = sign *
+                                           (weights_at(ev, shifted(-2), value) - 8.0 * weights_at(ev, shifted(-1), value) +
+                                            8.0 * weights_at(ev, shifted(1), value) - weights_at(ev, shifted(2), value)) /
+                                           (12.0 * h);
+                const Eigen::VectorXd exact = weights_at(ev, at(du0, dv0), derivative);
+                const double magnitude = weights_at(ev, at(du0, dv0), value).cwiseAbs().maxCoeff();
+                // 1e-8 of the derivative, or what the differences' own rounding allows.
+                const double tolerance = 1e-8 * exact.cwiseAbs().maxCoeff() + 1e-14 * magnitude / h;
+                EXPECT_LT((fd - exact).cwiseAbs().maxCoeff(), tolerance)
+                    << name << " face " << f << "/" << s << " corner " << corner << " at 2^-" << n << " order " << order;
+                ++checked;
+              }
+            }
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(checked, 1000);
+}
+
+// At the extraordinary vertex itself: du and dv span the tangent plane (their normal is the
+// limit of the normals around), the second derivatives are zero, and the normal is oriented
+// like the face's.
+TEST(LimitEvaluator, TangentsAtExtraordinaryVerticesSpanTheTangentPlane) {
+  for (const auto& [name, mesh] : ev_meshes()) {
+    auto ev = LimitEvaluator::create(mesh).value();
+    std::vector<double> factors;
+    int checked = 0;
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+      for (int32_t s = 0; s < ev.num_subfaces(f); ++s) {
+        for (int corner = 0; corner < 4; ++corner) {
+          if (!ev.ev_corner_weights(f, s, corner, 0.25, 2, factors)) continue;
+          const double cu = (corner == 1 || corner == 2) ? 1.0 : 0.0, cv = corner >= 2 ? 1.0 : 0.0;
+          const LimitSample at = ev.evaluate({f, s, cu, cv});
+          const double d = 1e-30;  // the normal converges slowly at boundary vertices of many faces
+          const LimitSample near = ev.evaluate({f, s, cu == 0.0 ? d : 1.0 - d, cv == 0.0 ? d : 1.0 - d});
+          EXPECT_GT(at.normal().dot(near.normal()), 1.0 - 1e-8) << name << " face " << f << "/" << s << " corner " << corner;
+          EXPECT_EQ(at.duu.norm() + at.duv.norm() + at.dvv.norm(), 0.0);
+          ++checked;
+        }
+      }
+    }
+    EXPECT_GT(checked, 0) << name;
+  }
+}
+
+// The quadrature support at extraordinary corners: the exact pressure integral of a cell
+// against the sum of its rings (each integrated exactly), and weight factors near 1.
+TEST(LimitEvaluator, ExtraordinaryCornerIntegralsAreTheSumsOfTheirRings) {
+  ControlMesh mesh = test::load_asset_mesh("spot_control_mesh.obj");
+  auto ev = LimitEvaluator::create(mesh).value();
+  const double gx[5] = {0.04691007703066800, 0.23076534494715845, 0.5, 0.76923465505284155, 0.95308992296933200};
+  const double gw[5] = {0.11846344252809454, 0.23931433524968324, 0.28444444444444444, 0.23931433524968324,
+                        0.11846344252809454};
+  int checked = 0;
+  for (int32_t f = 0; f < mesh.num_faces() && checked < 12; ++f) {
+    for (int32_t s = 0; s < ev.num_subfaces(f); ++s) {
+      for (int corner = 0; corner < 4; ++corner) {
+        const double size = 0.125;
+        std::vector<double> factors;
+        Eigen::Matrix3Xd exact;
+        if (!ev.ev_corner_weights(f, s, corner, size, 4, factors)) continue;
+        for (double x : factors) EXPECT_NEAR(x, 1.0, 1e-2);
+        ASSERT_TRUE(ev.ev_corner_normal_weights(f, s, corner, size, mesh.positions(), exact));
+        const std::vector<int32_t> support = ev.support(f);
+        // The cell's rings, 5 x 5 Gauss points on each of their squares (degree 8 is exact).
+        const double cu = (corner == 1 || corner == 2) ? 1.0 : 0.0, cv = corner >= 2 ? 1.0 : 0.0;
+        Eigen::Matrix3Xd rings = Eigen::Matrix3Xd::Zero(3, static_cast<Eigen::Index>(support.size()));
+        for (double h = size; h > 1e-9 * size; h *= 0.5) {
+          const double q = 0.5 * h;
+          for (auto [a, b] : std::array<std::array<double, 2>, 3>{{{q, 0.0}, {q, q}, {0.0, q}}}) {
+            for (int i = 0; i < 5; ++i) {
+              for (int j = 0; j < 5; ++j) {
+                const double du = a + q * gx[i], dv = b + q * gx[j];
+                const SurfacePoint p{f, s, cu == 0.0 ? du : 1.0 - du, cv == 0.0 ? dv : 1.0 - dv};
+                const LimitSample x = ev.evaluate(p);
+                const LimitStencil st = ev.stencil(p);
+                for (size_t k = 0; k < st.size(); ++k) {
+                  const auto col = std::find(support.begin(), support.end(), st.indices[k]) - support.begin();
+                  rings.col(col) += (q * q * gw[i] * gw[j] * st.position[k]) * x.du.cross(x.dv);
+                }
+              }
+            }
+          }
+        }
+        EXPECT_LT((exact - rings).cwiseAbs().maxCoeff(), 1e-11 * rings.cwiseAbs().maxCoeff()) << "face " << f;
+        ++checked;
+      }
+    }
+  }
+  EXPECT_GT(checked, 0);
+}
+
+// Topology the exact evaluation does not cover (an inner vertex of two faces, a non-manifold
+// vertex) is evaluated by OpenSubdiv Bfr instead of refused.
+TEST(LimitEvaluator, DegenerateTopologyIsStillEvaluated) {
+  const ControlMesh pillow({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)},
+                           std::vector<std::vector<int32_t>>{{0, 1, 2, 3}, {3, 2, 1, 0}});
+  std::vector<Vec3> points;
+  std::vector<std::vector<int32_t>> faces;
+  for (int j = 0; j < 3; ++j) {
+    for (int i = 0; i < 3; ++i) points.emplace_back(i, j, 0.0);
+  }
+  for (int j = 0; j < 2; ++j) {
+    for (int i = 0; i < 2; ++i) faces.push_back({j * 3 + i, j * 3 + i + 1, (j + 1) * 3 + i + 1, (j + 1) * 3 + i});
+  }
+  // A second 2 x 2 grid touching the first only at its corner point 8.
+  const auto base = static_cast<int32_t>(points.size());
+  for (int j = 0; j < 3; ++j) {
+    for (int i = 0; i < 3; ++i) {
+      if (i > 0 || j > 0) points.emplace_back(2 + i, 2 + j, 0.5);
+    }
+  }
+  auto id = [&](int i, int j) { return (i == 0 && j == 0) ? 8 : base + j * 3 + i - 1; };
+  for (int j = 0; j < 2; ++j) {
+    for (int i = 0; i < 2; ++i) faces.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)});
+  }
+  const ControlMesh bowtie(points, faces);
+  for (const ControlMesh* mesh : {&pillow, &bowtie}) {
+    auto ev = LimitEvaluator::create(*mesh);
+    ASSERT_TRUE(ev.ok()) << ev.error().message;
+    for (int32_t f = 0; f < mesh->num_faces(); ++f) {
+      const LimitStencil st = ev->stencil({f, 0, 0.3, 0.6});
+      EXPECT_NEAR(sum(st.position), 1.0, 1e-12);
     }
   }
 }

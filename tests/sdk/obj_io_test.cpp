@@ -132,6 +132,50 @@ TEST(ObjIo, MissingFileIsAnIoError) {
   EXPECT_EQ(mesh.error().code, ErrorCode::kIoError);
 }
 
+TEST(ObjIo, DirectoryIsNamedAsOne) {
+  auto mesh = read_obj(::testing::TempDir());
+  ASSERT_FALSE(mesh.ok());
+  EXPECT_EQ(mesh.error().code, ErrorCode::kIoError);
+  EXPECT_NE(mesh.error().message.find("is a directory"), std::string::npos) << mesh.error().message;
+  auto missing = read_obj("/nonexistent/softshell.obj");
+  EXPECT_NE(missing.error().message.find("No such file or directory"), std::string::npos) << missing.error().message;
+}
+
+// With `validate`, problems for the simulation are reported in the file's terms: the face's line
+// and OBJ's 1-based vertex numbers (validate_mesh speaks of 0-based control points).
+TEST(ObjIo, ValidationSpeaksInTheFilesTerms) {
+  ObjReadOptions options;
+  options.validate = true;
+  const char* square = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n";
+  struct Case {
+    std::string text;
+    ErrorCode code;
+    const char* expect;
+  };
+  const Case cases[] = {
+      {std::string(square) + "# a comment\nf 1 2 3 4\nf 1 2 3\n", ErrorCode::kUnprocessable,
+       "m.obj:7: this face and the face on line 6 run along their shared edge 1-2 in the same direction"},
+      {std::string(square) + "v 5 5 5\nf 1 2 3 4\n", ErrorCode::kUnprocessable,
+       "m.obj:5: vertex 5 belongs to no face"},
+      {std::string(square) + "f 1 2 2\nf 1 3 4\n", ErrorCode::kInvalidArgument,
+       "m.obj:5: the face uses vertex 2 twice (vertices 1 2 2)"},
+      {"v 0 0 0\nv 1 0 0\nv 2 0 0\n\nf 1 2 3\n", ErrorCode::kUnprocessable,
+       "m.obj:5: the face (vertices 1 2 3) has zero area"},
+      {std::string(square) + "v 0 0 1\nf 1 2 3\nf 2 1 4\nf 1 2 5\n", ErrorCode::kUnprocessable,
+       "the edge between vertices 1 and 2 belongs to the faces on lines 6, 7, 8"},
+      {"# nothing\n", ErrorCode::kInvalidArgument, "m.obj: the file has no vertices"},
+  };
+  for (const Case& c : cases) {
+    auto mesh = parse_obj(c.text, "m.obj", options);
+    ASSERT_FALSE(mesh.ok()) << c.text;
+    EXPECT_EQ(mesh.error().code, c.code) << c.text;
+    EXPECT_NE(mesh.error().message.find(c.expect), std::string::npos) << c.text << " -> " << mesh.error().message;
+  }
+  // A good file passes, and without `validate` nothing is checked beyond the syntax.
+  EXPECT_TRUE(parse_obj(std::string(square) + "f 1 2 3 4\n", "m.obj", options).ok());
+  EXPECT_TRUE(parse_obj(std::string(square) + "v 5 5 5\nf 1 2 3 4\n", "m.obj").ok());
+}
+
 // A short fuzz run in the test suite (the libFuzzer target runs longer in CI): random mutations of
 // real files must never crash, hang or produce a mesh that breaks validation.
 TEST(ObjIo, FuzzMutationsNeverCrash) {

@@ -1,6 +1,8 @@
 #include "shell_benchmarks.h"
 
 #include <cmath>
+#include <map>
+#include <random>
 
 namespace softshell::test {
 
@@ -115,6 +117,142 @@ std::vector<VertexConstraint> ScordelisLo::supports() const {
   }
   out.push_back({index(nt / 2, 0), kAxisY, Vec3::Zero()});  // axial rigid motion only
   return out;
+}
+
+ControlMesh fan_plate(int valence, int k, int sectors) {
+  if (sectors < 0) sectors = valence;
+  const bool closed = sectors == valence;
+  constexpr double kPi = 3.14159265358979323846;
+  auto axis = [&](int i) {
+    const double angle = 2.0 * kPi * i / valence;
+    return Vec3(std::cos(angle), std::sin(angle), 0.0);
+  };
+  // Grid point (a, b) of sector i is a e_i + b e_{i+1}; sector i's b-axis is sector i+1's a-axis.
+  std::vector<Vec3> positions{Vec3::Zero()};
+  const auto side = static_cast<size_t>(k + 1);
+  std::vector<std::vector<int32_t>> id(static_cast<size_t>(sectors + 1), std::vector<int32_t>(side * side, 0));
+  for (int i = 0; i <= sectors; ++i) {  // the a-axes (one more for an open fan's last b-axis)
+    if (i == sectors && closed) break;
+    for (int a = 1; a <= k; ++a) {
+      id[static_cast<size_t>(i)][static_cast<size_t>(a)] = static_cast<int32_t>(positions.size());
+      positions.push_back(a * axis(i));
+    }
+  }
+  for (int i = 0; i < sectors; ++i) {
+    auto& sector = id[static_cast<size_t>(i)];
+    const auto next = static_cast<size_t>(closed ? (i + 1) % valence : i + 1);
+    for (int b = 1; b <= k; ++b) sector[side * static_cast<size_t>(b)] = id[next][static_cast<size_t>(b)];
+    for (int b = 1; b <= k; ++b) {
+      for (int a = 1; a <= k; ++a) {
+        sector[static_cast<size_t>(a) + side * static_cast<size_t>(b)] = static_cast<int32_t>(positions.size());
+        positions.push_back(a * axis(i) + b * axis(i + 1));
+      }
+    }
+  }
+  std::vector<std::vector<int32_t>> faces;
+  for (int i = 0; i < sectors; ++i) {
+    const auto& sector = id[static_cast<size_t>(i)];
+    for (size_t b = 0; b < side - 1; ++b) {
+      for (size_t a = 0; a < side - 1; ++a) {
+        faces.push_back({sector[a + side * b], sector[a + 1 + side * b], sector[a + 1 + side * (b + 1)],
+                         sector[a + side * (b + 1)]});
+      }
+    }
+  }
+  return ControlMesh(std::move(positions), faces);
+}
+
+ControlMesh ngon_plate(int n, int rings) {
+  constexpr double kPi = 3.14159265358979323846;
+  std::vector<Vec3> positions;
+  for (int r = 1; r <= rings + 1; ++r) {
+    for (int i = 0; i < n; ++i) {
+      const double angle = 2.0 * kPi * (i + 0.3 * (r % 2)) / n;
+      positions.push_back(r * Vec3(std::cos(angle), std::sin(angle), 0.0));
+    }
+  }
+  std::vector<std::vector<int32_t>> faces;
+  std::vector<int32_t> centre;
+  for (int i = 0; i < n; ++i) centre.push_back(i);
+  faces.push_back(centre);
+  for (int r = 0; r < rings; ++r) {
+    for (int i = 0; i < n; ++i) {
+      const int next = (i + 1) % n;
+      faces.push_back({r * n + next, r * n + i, (r + 1) * n + i, (r + 1) * n + next});
+    }
+  }
+  return ControlMesh(std::move(positions), faces);
+}
+
+std::vector<char> boundary_points(const ControlMesh& mesh) {
+  std::map<std::pair<int32_t, int32_t>, int> edges;
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    auto fv = mesh.face(f);
+    for (size_t i = 0; i < fv.size(); ++i) {
+      const int32_t a = fv[i], b = fv[(i + 1) % fv.size()];
+      ++edges[{std::min(a, b), std::max(a, b)}];
+    }
+  }
+  std::vector<char> out(static_cast<size_t>(mesh.num_vertices()), 0);
+  for (const auto& [edge, count] : edges) {
+    if (count == 1) out[static_cast<size_t>(edge.first)] = out[static_cast<size_t>(edge.second)] = 1;
+  }
+  return out;
+}
+
+void perturb_interior(ControlMesh& mesh, double amount, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> uni(-amount, amount);
+  const std::vector<char> boundary = boundary_points(mesh);
+  for (size_t v = 0; v < boundary.size(); ++v) {
+    if (!boundary[v]) mesh.positions()[v] += Vec3(uni(rng), uni(rng), 0.0);
+  }
+}
+
+EvPlate make_ev_plate(int n, double a) {
+  EvPlate plate;
+  const int b1 = n / 4, b2 = 3 * n / 4;
+  auto block_point = [&](int i, int j) { return (i == b1 && j == b1) || (i == b2 && j == b2); };
+  auto block_cell = [&](int i, int j) {
+    return ((i == b1 - 1 || i == b1) && (j == b1 - 1 || j == b1)) || ((i == b2 - 1 || i == b2) && (j == b2 - 1 || j == b2));
+  };
+  std::vector<Vec3> positions;
+  std::map<std::pair<int, int>, int32_t> id;
+  for (int j = 0; j <= n; ++j) {
+    for (int i = 0; i <= n; ++i) {
+      if (block_point(i, j)) continue;
+      id[{i, j}] = static_cast<int32_t>(positions.size());
+      positions.emplace_back(a * i / n, a * j / n, 0.0);
+    }
+  }
+  std::vector<std::vector<int32_t>> faces;
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      if (block_cell(i, j)) continue;
+      if (i == n / 2 && j == n / 2) plate.centre = SurfacePoint{static_cast<int32_t>(faces.size()), 0, 0.0, 0.0};
+      faces.push_back({id[{i, j}], id[{i + 1, j}], id[{i + 1, j + 1}], id[{i, j + 1}]});
+    }
+  }
+  for (int block = 0; block < 2; ++block) {
+    // The second block is the first turned by 180 degrees about the centre.
+    const int c = block == 0 ? b1 : b2, d = block == 0 ? 1 : -1;
+    const Vec3 centre(a * c / n, a * c / n, 0.0);
+    const auto p = static_cast<int32_t>(positions.size());
+    positions.push_back(centre + d * Vec3(-0.4 * a / n, 0.0, 0.0));
+    const auto q = static_cast<int32_t>(positions.size());
+    positions.push_back(centre + d * Vec3(0.4 * a / n, 0.0, 0.0));
+    auto r = [&](int di, int dj) { return id[{c + d * di, c + d * dj}]; };
+    const int32_t r0 = r(-1, -1), r1 = r(0, -1), r2 = r(1, -1), r3 = r(1, 0), r4 = r(1, 1), r5 = r(0, 1), r6 = r(-1, 1),
+                  r7 = r(-1, 0);
+    faces.push_back({r0, r1, p, r7});
+    faces.push_back({r1, r2, r3, q});
+    faces.push_back({r1, q, p});
+    faces.push_back({q, r3, r4, r5});
+    faces.push_back({r5, r6, r7, p});
+    faces.push_back({p, q, r5});
+  }
+  plate.mesh = ControlMesh(std::move(positions), faces);
+  return plate;
 }
 
 }  // namespace softshell::test

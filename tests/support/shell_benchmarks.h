@@ -51,4 +51,33 @@ struct ScordelisLo {
 };
 ScordelisLo make_scordelis_lo(int nt, int nl);
 
+/// Flat meshes (z = 0) with extraordinary vertices, for patch tests and convergence studies.
+///
+/// `sectors` sectors of k x k quads around one vertex (sector i is the parallelogram spanned by the
+/// unit vectors at angles 2 pi i / valence and 2 pi (i + 1) / valence): all `valence` sectors, an
+/// interior extraordinary vertex of that valence; fewer, a boundary vertex with `sectors` faces.
+ControlMesh fan_plate(int valence, int k, int sectors = -1);
+/// An n-gon in the middle and `rings` rings of quads around it: its corners have valence 3, and
+/// its centre becomes an extraordinary vertex of valence n after one subdivision step.
+ControlMesh ngon_plate(int n, int rings);
+/// Control points on the boundary (on an edge of one face).
+std::vector<char> boundary_points(const ControlMesh& mesh);
+/// Moves every interior control point by up to `amount` (uniformly random, in the plane z = 0).
+void perturb_interior(ControlMesh& mesh, double amount, unsigned seed);
+
+/// The square plate [0, a]^2 with n x n faces (n a multiple of 4, at least 8) in which the two
+/// 2 x 2 blocks around the grid points (n/4, n/4) and (3n/4, 3n/4) are each split into two
+/// quads, two more quads and two triangles, so that after one subdivision step each block holds
+/// two valence-3 and two valence-5 extraordinary vertices. Point-symmetric about the centre,
+/// which is a regular control point; its limit point is the plate's centre.
+struct EvPlate {
+  ControlMesh mesh;
+  SurfacePoint centre;
+};
+EvPlate make_ev_plate(int n, double a);
+
+/// Navier's series for the centre deflection of a simply supported square plate under a
+/// uniform load, w D / (q a^4) (to 1e-12).
+inline constexpr double kNavierCentreDeflection = 0.004062352661;
+
 }  // namespace softshell::test

@@ -25,6 +25,7 @@
 #include "softshell/picking.h"
 #include "softshell/result.h"
 #include "softshell/session.h"
+#include "softshell/stresses.h"
 #include "softshell/softshell_c.h"
 #include "softshell/tessellation.h"
 
@@ -57,6 +58,7 @@ enum class Kind : uint8_t {
   kRefinement,
   kSession,
   kDeformation,
+  kStressField,
 };
 /// "ss_mesh", "ss_evaluator", ...
 const char* kind_name(Kind kind);
@@ -79,6 +81,7 @@ SOFTSHELL_C_HANDLE(ss_grab, kGrab, Grab)
 SOFTSHELL_C_HANDLE(ss_refinement, kRefinement, MeshRefinement)
 SOFTSHELL_C_HANDLE(ss_session, kSession, Session)
 SOFTSHELL_C_HANDLE(ss_deformation, kDeformation, DeformationObject)
+SOFTSHELL_C_HANDLE(ss_stress_field, kStressField, StressField)
 #undef SOFTSHELL_C_HANDLE
 
 // ------------------------------------------------------------------------------------------------

@@ -38,6 +38,7 @@ const char* kind_name(Kind kind) {
     case Kind::kRefinement: return "ss_refinement";
     case Kind::kSession: return "ss_session";
     case Kind::kDeformation: return "ss_deformation";
+    case Kind::kStressField: return "ss_stress_field";
     case Kind::kNone: break;
   }
   return "handle";

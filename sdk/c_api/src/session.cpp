@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <future>
 #include <mutex>
@@ -17,6 +18,12 @@ using namespace softshell;         // NOLINT(google-build-using-namespace): a .c
 using namespace softshell::c_api;  // NOLINT(google-build-using-namespace)
 
 namespace {
+
+ss_stress_sample stress_to_c(const StressSample& sample) {
+  return ss_stress_sample{to_c(sample.point),          to_c(sample.position),
+                          to_c(sample.membrane_force), to_c(sample.bending_moment),
+                          sample.von_mises_top,        sample.von_mises_bottom};
+}
 
 // Operations destroyed while running: kept (with their session) until they finish, so that
 // `ss_deformation_destroy` never blocks (the last reference to a session would wait for its
@@ -253,5 +260,61 @@ ss_status ss_session_limit_comb(ss_session* session, const ss_geom_id* id, const
     });
   });
 }
+
+ss_status ss_session_stresses(ss_session* session, const ss_geom_id* id, uint32_t res_id, int32_t level,
+                              const ss_surface_point* points, int32_t num_points, double yield_strength,
+                              ss_stress_field** out_field) {
+  return guard("ss_session_stresses", [&] {
+    required(out_field, "out_field");
+    *out_field = nullptr;
+    const auto s = live(session, "session");
+    StressQuery query;
+    if (level < 0 || level > StressQuery::kMaxLevel) {
+      fail(ErrorCode::kInvalidArgument, "level must be 1.." + std::to_string(StressQuery::kMaxLevel) +
+                                            " (tessellation vertices) or 0 (the given points), got " +
+                                            std::to_string(level));
+    }
+    query.level = level;
+    count_arg(num_points, "num_points");
+    if (level == 0) {
+      if (num_points == 0) fail(ErrorCode::kInvalidArgument, "level 0 asks for the given points, but num_points is 0");
+      if (static_cast<size_t>(num_points) > StressQuery::kMaxPoints) {
+        fail(ErrorCode::kInvalidArgument, "at most " + std::to_string(StressQuery::kMaxPoints) +
+                                              " points per query, got " + std::to_string(num_points));
+      }
+      required(points, "points");
+      query.points.reserve(static_cast<size_t>(num_points));
+      for (int32_t i = 0; i < num_points; ++i) query.points.push_back(point(points + i, "points"));
+    } else if (num_points != 0) {
+      fail(ErrorCode::kInvalidArgument, "give either a level (1..4) or points (level 0), not both");
+    }
+    if (!std::isfinite(yield_strength) || yield_strength < 0.0) {
+      fail(ErrorCode::kInvalidArgument, "yield_strength must be finite and >= 0 (Pa; 0 = unknown)");
+    }
+    query.yield_strength = yield_strength;
+    auto field = std::make_shared<StressField>(s->stresses(geom_id(id), res_id, query).value());
+    *out_field = make_handle<ss_stress_field>(std::move(field));
+  });
+}
+
+ss_status ss_stress_field_samples(const ss_stress_field* field, ss_stress_sample* out_samples, int32_t capacity,
+                                  int32_t* out_count) {
+  return guard("ss_stress_field_samples", [&] {
+    const auto f = live(field, "field");
+    write_items(out_samples, capacity, out_count, f->samples.size(), "stress samples", [&](ss_stress_sample* o) {
+      for (const StressSample& sample : f->samples) *o++ = stress_to_c(sample);
+    });
+  });
+}
+
+ss_status ss_stress_field_max(const ss_stress_field* field, ss_stress_sample* out_max, int32_t* out_exceeds_yield) {
+  return guard("ss_stress_field_max", [&] {
+    const auto f = live(field, "field");
+    *required(out_max, "out_max") = stress_to_c(f->max);
+    if (out_exceeds_yield) *out_exceeds_yield = f->exceeds_yield ? 1 : 0;
+  });
+}
+
+void ss_stress_field_destroy(ss_stress_field* field) { destroy(field, "ss_stress_field_destroy"); }
 
 }  // extern "C"

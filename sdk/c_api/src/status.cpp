@@ -123,6 +123,7 @@ const char* ss_status_name(ss_status status) {
     case SS_CANCELLED: return "cancelled";
     case SS_IO_ERROR: return "io_error";
     case SS_INTERNAL: return "internal";
+    case SS_CONFLICT: return "conflict";
     case SS_BUFFER_TOO_SMALL: return "buffer_too_small";
     case SS_NOT_READY: return "not_ready";
     default: return "unknown_status";

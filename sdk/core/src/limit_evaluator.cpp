@@ -9,6 +9,7 @@
 #include <opensubdiv/far/error.h>
 #include <opensubdiv/far/topologyDescriptor.h>
 
+#include "exact_limit.h"
 #include "limit_evaluator_impl.h"
 #include "softshell/mesh_validation.h"
 
@@ -119,12 +120,31 @@ Result<LimitEvaluator> LimitEvaluator::create(const ControlMesh& mesh, const Opt
     factory_options.SetApproxLevelSmooth(options.approx_level_smooth);
     factory_options.SetApproxLevelSharp(options.approx_level_sharp);
     Bfr::RefinerSurfaceFactory<> factory(*impl->refiner, factory_options);
+    impl->programs = std::make_shared<internal::FaceProgramStore>();
+    const Far::TopologyLevel& base = impl->refiner->GetLevel(0);
+
+    // With sharp features the whole surface is Bfr's (creases change the rules level by level;
+    // mixing approximate and exact faces around one vertex would open cracks).
+    const bool bfr_only = impl->mesh.has_sharpness();
 
     impl->faces.resize(static_cast<size_t>(mesh.num_faces()));
     std::vector<int32_t> sorted;
+    internal::Neighbourhood hood;
+    internal::PatchGrid grid;
     for (int32_t f = 0; f < mesh.num_faces(); ++f) {
       internal::FaceSurface& fs = impl->faces[static_cast<size_t>(f)];
       if (!factory.FaceHasLimitSurface(f)) continue;  // ghost face (BoundaryMode::kNone)
+      fs.has_surface = true;
+      // Exact unless regular (Bfr is exact there) or at a non-manifold or valence-2 vertex
+      // (OpenSubdiv's own rules, Bfr's approximation).
+      if (!bfr_only && !internal::regular_grid(base, f, 0, grid) && internal::extract_neighbourhood(base, f, 0, hood)) {
+        fs.program = impl->programs->get(hood.signature);
+        if (fs.program) {
+          fs.support.assign(hood.vertices.begin(), hood.vertices.end());
+          impl->max_support = std::max(impl->max_support, static_cast<int32_t>(fs.support.size()));
+          continue;
+        }
+      }
       if (!factory.InitVertexSurface(f, &fs.surface)) {
         fail(ErrorCode::kUnprocessable, "OpenSubdiv could not set up the limit surface of face " + std::to_string(f));
       }
@@ -158,11 +178,38 @@ int32_t LimitEvaluator::num_subfaces(int32_t face) const {
 }
 
 bool LimitEvaluator::has_limit_surface(int32_t face) const {
-  return face >= 0 && face < num_faces() && impl_->faces[static_cast<size_t>(face)].surface.IsValid();
+  return face >= 0 && face < num_faces() && impl_->faces[static_cast<size_t>(face)].has_surface;
 }
 
 bool LimitEvaluator::is_regular(int32_t face) const {
-  return has_limit_surface(face) && impl_->faces[static_cast<size_t>(face)].surface.IsRegular();
+  if (!has_limit_surface(face)) return false;
+  const internal::FaceSurface& fs = impl_->faces[static_cast<size_t>(face)];
+  return !fs.program && fs.surface.IsRegular();
+}
+
+bool LimitEvaluator::ev_corner_weights(int32_t face, int32_t subface, int corner, double cell_size, int gauss_points,
+                                       std::vector<double>& weight_factors) const {
+  if (!has_limit_surface(face) || subface < 0 || subface >= num_subfaces(face) || corner < 0 || corner > 3 ||
+      !(cell_size > 0.0 && cell_size <= 1.0) || gauss_points < 1 || gauss_points > 16) {
+    return false;
+  }
+  const internal::FaceSurface& fs = impl_->faces[static_cast<size_t>(face)];
+  return fs.program && fs.program->corner_rule(subface, corner, cell_size, gauss_points, weight_factors);
+}
+
+bool LimitEvaluator::ev_corner_normal_weights(int32_t face, int32_t subface, int corner, double cell_size,
+                                              const std::vector<Vec3>& positions, Eigen::Matrix3Xd& out) const {
+  if (!has_limit_surface(face) || subface < 0 || subface >= num_subfaces(face) || corner < 0 || corner > 3 ||
+      !(cell_size > 0.0 && cell_size <= 1.0) || positions.size() != static_cast<size_t>(num_control_points())) {
+    return false;
+  }
+  const internal::FaceSurface& fs = impl_->faces[static_cast<size_t>(face)];
+  if (!fs.program) return false;
+  internal::RowMatrix x(static_cast<Eigen::Index>(fs.support.size()), 3), local;
+  for (size_t k = 0; k < fs.support.size(); ++k) x.row(static_cast<Eigen::Index>(k)) = positions[static_cast<size_t>(fs.support[k])].transpose();
+  if (!fs.program->corner_normal_integral(subface, corner, cell_size, x, local)) return false;
+  out = local.transpose();
+  return true;
 }
 
 std::vector<int32_t> LimitEvaluator::support(int32_t face) const {
@@ -206,27 +253,34 @@ void LimitEvaluator::Impl::bfr_coord(const SurfacePoint& p, double out_uv[2]) co
   }
 }
 
+void LimitEvaluator::Impl::weights(const SurfacePoint& p, double* out, std::vector<double>& scratch) const {
+  const internal::FaceSurface& fs = faces[static_cast<size_t>(p.face)];
+  if (fs.program) {
+    fs.program->evaluate(p.subface, p.u, p.v, out, scratch);
+    return;
+  }
+  const size_t n = fs.support.size();
+  double uv[2];
+  bfr_coord(p, uv);
+  fs.surface.EvaluateStencil(uv, out, out + n, out + 2 * n, out + 3 * n, out + 4 * n, out + 5 * n);
+  // Derivatives with respect to the normalized sub-face coordinates (chain rule).
+  const double s = fs.subface_scale;
+  if (s != 1.0) {
+    for (size_t k = n; k < 3 * n; ++k) out[k] *= s;
+    for (size_t k = 3 * n; k < 6 * n; ++k) out[k] *= s * s;
+  }
+}
+
 void LimitEvaluator::stencil(const SurfacePoint& p, LimitStencil& out) const {
   check(p).value();
   const internal::FaceSurface& fs = impl_->faces[static_cast<size_t>(p.face)];
   const size_t n = fs.support.size();
   out.indices = fs.support;
-  for (auto* w : {&out.position, &out.du, &out.dv, &out.duu, &out.duv, &out.dvv}) w->resize(n);
-  double uv[2];
-  impl_->bfr_coord(p, uv);
-  fs.surface.EvaluateStencil(uv, out.position.data(), out.du.data(), out.dv.data(), out.duu.data(), out.duv.data(),
-                             out.dvv.data());
-  // Derivatives with respect to the normalized sub-face coordinates (chain rule).
-  const double s = fs.subface_scale;
-  if (s != 1.0) {
-    for (size_t k = 0; k < n; ++k) {
-      out.du[k] *= s;
-      out.dv[k] *= s;
-      out.duu[k] *= s * s;
-      out.duv[k] *= s * s;
-      out.dvv[k] *= s * s;
-    }
-  }
+  thread_local std::vector<double> buffer, scratch;
+  buffer.resize(6 * n);
+  impl_->weights(p, buffer.data(), scratch);
+  std::vector<double>* rows[6] = {&out.position, &out.du, &out.dv, &out.duu, &out.duv, &out.dvv};
+  for (size_t d = 0; d < 6; ++d) rows[d]->assign(&buffer[d * n], &buffer[d * n] + n);
   if (fs.has_duplicates) {
     // Merge repeated control points so that every index appears once.
     LimitStencil merged;
@@ -270,19 +324,20 @@ void LimitEvaluator::face_stencils(int32_t face, int32_t subface, const std::vec
     column[k] = static_cast<int32_t>(it - out_indices.begin());
     if (it == out_indices.end()) out_indices.push_back(fs.support[k]);
   }
+  if (fs.program) {  // every point of the face at once, no repeated control points
+    thread_local internal::RowMatrix rows;
+    fs.program->evaluate_many(subface, uvs.data(), uvs.size(), rows);
+    out_weights = rows;
+    return;
+  }
   out_weights.setZero(static_cast<Eigen::Index>(6 * uvs.size()), static_cast<Eigen::Index>(out_indices.size()));
-  std::vector<double> w(6 * n);
-  const double s = fs.subface_scale;
-  const double scale[6] = {1.0, s, s, s * s, s * s, s * s};
+  std::vector<double> w(6 * n), scratch;
   for (size_t i = 0; i < uvs.size(); ++i) {
-    double uv[2];
-    impl_->bfr_coord(SurfacePoint{face, subface, uvs[i][0], uvs[i][1]}, uv);
-    fs.surface.EvaluateStencil(uv, &w[0], &w[n], &w[2 * n], &w[3 * n], &w[4 * n], &w[5 * n]);
+    impl_->weights(SurfacePoint{face, subface, uvs[i][0], uvs[i][1]}, w.data(), scratch);
     for (int d = 0; d < 6; ++d) {
-      for (size_t k = 0; k < n; ++k) {
-        out_weights(static_cast<Eigen::Index>(6 * i + static_cast<size_t>(d)), column[k]) +=
-            scale[d] * w[static_cast<size_t>(d) * n + k];
-      }
+      const auto row = static_cast<Eigen::Index>(6 * i + static_cast<size_t>(d));
+      const double* src = &w[static_cast<size_t>(d) * n];
+      for (size_t k = 0; k < n; ++k) out_weights(row, column[k]) += src[k];
     }
   }
 }
@@ -291,6 +346,21 @@ void LimitEvaluator::Impl::evaluate_many(int32_t face, int32_t subface, const st
                                          size_t count, const std::vector<Vec3>& positions, Vec3* out_position,
                                          Vec3* out_du, Vec3* out_dv, std::vector<double>& scratch) const {
   const internal::FaceSurface& fs = faces[static_cast<size_t>(face)];
+  if (fs.program) {
+    internal::RowMatrix rows;
+    fs.program->evaluate_many(subface, uvs, count, rows);
+    Eigen::MatrixX3d x(static_cast<Eigen::Index>(fs.support.size()), 3);
+    for (size_t k = 0; k < fs.support.size(); ++k) {
+      x.row(static_cast<Eigen::Index>(k)) = positions[static_cast<size_t>(fs.support[k])].transpose();
+    }
+    for (size_t i = 0; i < count; ++i) {
+      const auto r = static_cast<Eigen::Index>(6 * i);
+      out_position[i] = (rows.row(r) * x).transpose();
+      if (out_du) out_du[i] = (rows.row(r + 1) * x).transpose();
+      if (out_dv) out_dv[i] = (rows.row(r + 2) * x).transpose();
+    }
+    return;
+  }
   const Bfr::Surface<double>& surface = fs.surface;
   const Bfr::Surface<double>::PointDescriptor desc(3);
   scratch.resize(3 * static_cast<size_t>(surface.GetNumPatchPoints()));

@@ -1,10 +1,11 @@
 #pragma once
-// Private: the OpenSubdiv objects behind LimitEvaluator, shared with Tessellation.
+// Private: the objects behind LimitEvaluator, shared with Tessellation.
 //
-// The Bfr surface of every face is built once, when the evaluator is created, and kept: a
-// Bfr::Surface is a small immutable object (control point indices plus a shared patch tree for
-// irregular faces) whose const evaluation functions are safe to call from many threads. The
-// factory and its cache are only used during construction.
+// Regular faces (one bicubic B-spline patch) are evaluated by OpenSubdiv Bfr, which is exact
+// there; every other face by an exact FaceProgram (exact_limit.h), shared by all faces with the
+// same 1-ring topology. Faces next to sharp features (only with Options::sharp_features) keep
+// Bfr's approximation. Everything is built once, when the evaluator is created, and immutable
+// afterwards: the const evaluation functions are safe to call from many threads.
 
 #include <memory>
 #include <vector>
@@ -13,6 +14,11 @@
 #include <opensubdiv/far/topologyRefiner.h>
 
 #include "softshell/limit_evaluator.h"
+
+namespace softshell::internal {
+class FaceProgram;
+class FaceProgramStore;
+}  // namespace softshell::internal
 
 namespace softshell::internal {
 
@@ -24,8 +30,10 @@ namespace Far = OpenSubdiv::Far;
 std::unique_ptr<Far::TopologyRefiner> make_refiner(const ControlMesh& mesh);
 
 struct FaceSurface {
-  Bfr::Surface<double> surface;    // invalid for ghost faces
-  std::vector<int32_t> support;    // control point indices, as Bfr orders them
+  Bfr::Surface<double> surface;       // Bfr faces only (invalid for ghost and exact faces)
+  const FaceProgram* program = nullptr;  // exact faces: support = the program's local points
+  bool has_surface = false;           // false for ghost faces
+  std::vector<int32_t> support;       // control point indices, as Bfr or the program orders them
   bool has_duplicates = false;     // a control point appears twice in `support` (tiny closed meshes)
   double subface_scale = 1.0;      // d(Bfr coordinate) / d(normalized sub-face coordinate)
 };
@@ -39,7 +47,12 @@ struct LimitEvaluator::Impl {
   Options options;
   std::unique_ptr<internal::Far::TopologyRefiner> refiner;  // base level only
   std::vector<internal::FaceSurface> faces;
+  std::shared_ptr<internal::FaceProgramStore> programs;
   int32_t max_support = 0;
+
+  /// Weights at a point (6 x support, row-major: N, N_u, N_v, N_uu, N_uv, N_vv, w.r.t. the
+  /// sub-face's own coordinates), in support order (repeated points not merged).
+  void weights(const SurfacePoint& p, double* out, std::vector<double>& scratch) const;
 
   /// Bfr (u, v) of a surface point (sub-face coordinates converted for n-gons).
   void bfr_coord(const SurfacePoint& p, double out_uv[2]) const;

@@ -1,11 +1,17 @@
 #include "softshell/obj_io.h"
 
+#include <algorithm>
+#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
+#include <cstring>
+#include <map>
 #include <system_error>
+
+#include "softshell/mesh_validation.h"
 
 namespace softshell {
 namespace {
@@ -151,6 +157,7 @@ class ObjParser {
       if (extra >= 4 || !parse_double(tok, ignored)) error("unexpected " + quoted(tok) + " after the vertex coordinates");
     }
     positions_.emplace_back(xyz[0], xyz[1], xyz[2]);
+    if (options_.validate) vertex_lines_.push_back(current_line_);
   }
 
   int32_t resolve_index(std::string_view tok, const char* what) {
@@ -203,6 +210,7 @@ class ObjParser {
     const size_t size = indices_.size() - start;
     if (size < 3) error("a face needs at least 3 vertices, this one has " + std::to_string(size));
     face_sizes_.push_back(static_cast<int32_t>(size));
+    if (options_.validate) face_lines_.push_back(current_line_);
   }
 
   // "t name ni/nf/ns ints... floats... strings..."
@@ -271,7 +279,91 @@ class ObjParser {
     mesh.creases() = std::move(mesh_creases_);
     mesh.corners() = std::move(mesh_corners_);
     mesh.set_boundary(boundary_);
+    if (options_.validate) check(mesh);
     return mesh;
+  }
+
+  // --- validation in the file's terms (OBJ numbers vertices from 1; each face has its line) ---
+  std::string at_line(int64_t line) const { return std::string(source_) + ":" + std::to_string(line) + ": "; }
+  std::string at_face(int32_t f) const { return at_line(face_lines_[static_cast<size_t>(f)]); }
+  static std::string vertex(int32_t v) { return "vertex " + std::to_string(int64_t{v} + 1); }
+  static std::string corners(const ControlMesh& mesh, int32_t f) {
+    std::string out = "(vertices";
+    auto face = mesh.face(f);
+    for (size_t i = 0; i < face.size() && i < 8; ++i) out += " " + std::to_string(int64_t{face[i]} + 1);
+    return out + (face.size() > 8 ? " ...)" : ")");
+  }
+
+  // The faces along the edge a-b (each with its direction a -> b), found again for the message.
+  static std::vector<std::pair<int32_t, bool>> faces_on_edge(const ControlMesh& mesh, int32_t a, int32_t b) {
+    std::vector<std::pair<int32_t, bool>> out;
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+      auto face = mesh.face(f);
+      for (size_t i = 0; i < face.size(); ++i) {
+        const int32_t p = face[i], q = face[(i + 1) % face.size()];
+        if ((p == a && q == b) || (p == b && q == a)) out.emplace_back(f, p == a);
+      }
+    }
+    return out;
+  }
+
+  // The edge of face f at vertex a that `bad` says is wrong, as (a, b).
+  template <class Bad>
+  static std::pair<int32_t, int32_t> edge_at(const ControlMesh& mesh, int32_t f, int32_t a, Bad&& bad) {
+    auto face = mesh.face(f);
+    for (size_t i = 0; i < face.size(); ++i) {
+      const int32_t p = face[i], q = face[(i + 1) % face.size()];
+      if ((p == a || q == a) && bad(faces_on_edge(mesh, p, q))) return {std::min(p, q), std::max(p, q)};
+    }
+    return {a, a};
+  }
+
+  std::string describe(const ControlMesh& mesh, const MeshIssue& issue) const {
+    using K = MeshIssueKind;
+    const int32_t f = issue.face, v = issue.vertex;
+    switch (issue.kind) {
+      case K::kEmpty:
+        return std::string(source_) + (mesh.num_vertices() == 0 ? ": the file has no vertices ('v' lines)"
+                                                                 : ": the file has no faces ('f' lines)");
+      case K::kRepeatedIndex:
+        return at_face(f) + "the face uses " + vertex(v) + " twice " + corners(mesh, f);
+      case K::kZeroAreaFace:
+        return at_face(f) + "the face " + corners(mesh, f) + " has zero area (its vertices are coincident or collinear)";
+      case K::kUnusedVertex:
+        return at_line(vertex_lines_[static_cast<size_t>(v)]) + vertex(v) + " belongs to no face; remove it";
+      case K::kNonManifoldEdge: {
+        const auto [a, b] = edge_at(mesh, f, v, [](const auto& on) { return on.size() > 2; });
+        std::string lines;
+        for (const auto& [g, forward] : faces_on_edge(mesh, a, b)) {
+          lines += (lines.empty() ? "" : ", ") + std::to_string(face_lines_[static_cast<size_t>(g)]);
+        }
+        return at_face(f) + "the edge between vertices " + std::to_string(int64_t{a} + 1) + " and " +
+               std::to_string(int64_t{b} + 1) + " belongs to the faces on lines " + lines +
+               "; a surface edge may belong to at most 2 faces";
+      }
+      case K::kInconsistentOrientation: {
+        const auto same = [](const auto& on) { return on.size() == 2 && on[0].second == on[1].second; };
+        const auto [a, b] = edge_at(mesh, f, v, same);
+        const auto on = faces_on_edge(mesh, a, b);
+        const int32_t other = on.size() == 2 ? (on[0].first == f ? on[1].first : on[0].first) : f;
+        return at_face(f) + "this face and the face on line " + std::to_string(face_lines_[static_cast<size_t>(other)]) +
+               " run along their shared edge " + std::to_string(int64_t{a} + 1) + "-" + std::to_string(int64_t{b} + 1) +
+               " in the same direction: their orientations disagree (reverse the order of one face's vertices)";
+      }
+      default:  // tags (which count vertices from 0, as OpenSubdiv does) and what the parser rules out
+        return std::string(source_) + ": " + issue.message;
+    }
+  }
+
+  void check(const ControlMesh& mesh) const {
+    const std::vector<MeshIssue> issues = find_mesh_issues(mesh, 64);
+    if (issues.empty()) return;
+    std::string message = describe(mesh, issues.front());
+    if (issues.size() > 1) {
+      message += " (and " + std::to_string(issues.size() - 1) + (issues.size() >= 64 ? " or more" : "") +
+                 " other problem" + (issues.size() > 2 ? "s" : "") + ")";
+    }
+    fail(issues.front().code(), message);
   }
 
   std::string_view source_;
@@ -281,6 +373,7 @@ class ObjParser {
   std::vector<Vec3> positions_;
   std::vector<int32_t> face_sizes_;
   std::vector<int32_t> indices_;
+  std::vector<int64_t> vertex_lines_, face_lines_;  // only with options_.validate
   std::vector<Crease> mesh_creases_;
   std::vector<Corner> mesh_corners_;
   BoundaryMode boundary_ = BoundaryMode::kEdgeAndCorner;
@@ -307,8 +400,14 @@ Result<ControlMesh> parse_obj(std::string_view text, std::string_view source_nam
 }
 
 Result<ControlMesh> read_obj(const std::filesystem::path& path, const ObjReadOptions& options) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    return Error{ErrorCode::kIoError, "'" + path.string() + "' is a directory, not an OBJ file"};
+  }
   std::ifstream file(path, std::ios::binary);
-  if (!file) return Error{ErrorCode::kIoError, "cannot open '" + path.string() + "' for reading"};
+  if (!file) {
+    return Error{ErrorCode::kIoError, "cannot open '" + path.string() + "' for reading: " + std::strerror(errno)};
+  }
   std::ostringstream buffer;
   buffer << file.rdbuf();
   if (file.bad()) return Error{ErrorCode::kIoError, "reading '" + path.string() + "' failed"};

@@ -134,41 +134,53 @@ void FloorContact::add_to(DeformationRequest& request) const {
                                       lagrange_constraints.end());
 }
 
-Result<FloorContact> floor_contact(const Tessellation& tessellation, const Plane& floor, const FloorOptions& options) {
-  return capture([&]() -> FloorContact {
+Result<std::vector<int32_t>> floor_touching_samples(const Tessellation& tessellation, const Plane& floor,
+                                                    double tolerance) {
+  return capture([&]() -> std::vector<int32_t> {
     if (!finite(floor.point) || !finite(floor.normal) || !(floor.normal.norm() > 0.0)) {
       fail(ErrorCode::kInvalidArgument, "the floor plane needs a finite point and a finite, non-zero normal");
     }
-    if (std::isnan(options.tolerance) || std::isinf(options.tolerance)) {
-      fail(ErrorCode::kInvalidArgument, "floor tolerance must be finite");
-    }
+    if (!std::isfinite(tolerance)) fail(ErrorCode::kInvalidArgument, "floor tolerance must be finite");
+    if (tolerance < 0.0) tolerance = 1e-3 * tessellation.evaluator().mesh().bounding_diagonal();
     const Vec3 n = floor.normal.normalized();
-    int axis = -1;
-    if (options.axes == FloorAxes::kNormal) {
-      for (int a = 0; a < 3; ++a) {
-        if (std::abs(std::abs(n[a]) - 1.0) <= 1e-12) axis = a;
-      }
-      if (axis < 0) {
-        fail(ErrorCode::kInvalidArgument,
-             "normal-only floor contacts need a floor normal along x, y or z: Lagrange constraints act on each "
-             "axis separately (PROTOCOL.md), so a tilted normal cannot be expressed; use FloorAxes::kAll");
-      }
+    const auto& x = tessellation.vertices();
+    std::vector<int32_t> touching;
+    for (size_t i = 0; i < x.size(); ++i) {
+      if (n.dot(x[i] - floor.point) <= tolerance) touching.push_back(static_cast<int32_t>(i));
+    }
+    return touching;
+  });
+}
+
+int coordinate_axis(const Vec3& normal) {
+  const double length = normal.norm();
+  if (!(length > 0.0) || !std::isfinite(length)) return -1;
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(std::abs(normal[a]) / length - 1.0) <= 1e-9) return a;
+  }
+  return -1;
+}
+
+Result<FloorContact> floor_contact(const Tessellation& tessellation, const Plane& floor, const FloorOptions& options) {
+  return capture([&]() -> FloorContact {
+    const std::vector<int32_t> touching = floor_touching_samples(tessellation, floor, options.tolerance).value();
+    const Vec3 n = floor.normal.normalized();
+    const int axis = options.axes == FloorAxes::kNormal ? coordinate_axis(n) : -1;
+    if (options.axes == FloorAxes::kNormal && axis < 0) {
+      fail(ErrorCode::kInvalidArgument,
+           "normal-only floor contacts need a floor normal along x, y or z: Lagrange constraints act on each "
+           "axis separately (PROTOCOL.md), so a tilted normal cannot be expressed; use FloorAxes::kAll");
     }
     const LimitEvaluator& ev = tessellation.evaluator();
     const double size = ev.mesh().bounding_diagonal();
-    const double tolerance = options.tolerance < 0.0 ? 1e-3 * size : options.tolerance;
 
     // Touching samples, grouped by control face (ordered, so the result is deterministic).
     const auto& x = tessellation.vertices();
     const auto& points = tessellation.vertex_points();
     std::map<int32_t, std::vector<size_t>> by_face;
     FloorContact out;
-    for (size_t i = 0; i < x.size(); ++i) {
-      if (n.dot(x[i] - floor.point) <= tolerance) {
-        by_face[points[i].face].push_back(i);
-        ++out.touching_samples;
-      }
-    }
+    for (int32_t i : touching) by_face[points[static_cast<size_t>(i)].face].push_back(static_cast<size_t>(i));
+    out.touching_samples = static_cast<int32_t>(touching.size());
 
     Eigen::MatrixXd rigid(0, 6);  // the rigid modes' values in the constrained directions
     Vec3 centre = Vec3::Zero();

@@ -1,3 +1,6 @@
+// Levels of detail: how each fine face sits in its coarse face (the parameter maps), carrying points,
+// constraints and forces between levels, and the parallel coarse/fine simulation. (Long: the maps
+// and the transfers are one piece of bookkeeping; ParallelLevels at the end only uses them.)
 #include "softshell/level_of_detail.h"
 
 #include <algorithm>

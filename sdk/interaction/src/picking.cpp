@@ -1,3 +1,6 @@
+// Picking: the triangle BVH (build, refit, ray and box queries), the Newton refinement of a ray hit
+// onto the exact limit surface (walking across faces), and the Picker that joins them. (Long: the
+// three are one pipeline and share the ray and box kernels at the top; each part is one section.)
 #include "softshell/picking.h"
 
 #include <algorithm>

@@ -96,10 +96,7 @@ struct RemoteSession::Impl {
   }
 
   Result<Reply> finish(std::unique_ptr<httplib::Client> c, httplib::Result res) {
-    if (!res) {
-      return Error{ErrorCode::kUnavailable,
-                   "no answer from the softshell server at " + url + ": " + httplib::to_string(res.error())};
-    }
+    if (!res) return Error{ErrorCode::kUnavailable, transport_error(res.error())};
     Reply reply{res->status, std::move(res->body), res->get_header_value("Content-Type")};
     if (res->get_header_value("Connection") != "close") release(std::move(c));
     return reply;
@@ -121,6 +118,26 @@ struct RemoteSession::Impl {
     (*c)->set_read_timeout(options.request_timeout);
     auto res = (*c)->Post(path, headers(accept), body, std::string(wire::media_type(body_format)));
     return finish(std::move(*c), std::move(res));
+  }
+
+  // What went wrong on the way, in words a person can act on (httplib's own names, such as
+  // "Connection", say little).
+  std::string transport_error(httplib::Error e) const {
+    using E = httplib::Error;
+    const auto seconds = [](std::chrono::milliseconds ms) { return number_text(static_cast<double>(ms.count()) / 1000.0); };
+    switch (e) {
+      case E::Connection:
+        return "connection refused: is softshell-server running at " + url + "?";
+      case E::ConnectionTimeout:
+        return "no connection to " + url + " within " + seconds(options.connect_timeout) +
+               " s: is the host reachable and softshell-server running there?";
+      case E::Read:
+        return "the softshell server at " + url + " closed the connection or did not answer in time";
+      case E::Write:
+        return "sending the request to the softshell server at " + url + " failed (the connection was closed)";
+      default:
+        return "no answer from the softshell server at " + url + ": " + httplib::to_string(e);
+    }
   }
 
   static Error server_error(const Reply& r) { return wire::decode_error_json(r.body, r.status); }

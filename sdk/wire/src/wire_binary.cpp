@@ -179,8 +179,8 @@ Result<UploadResult> decode_upload_response_binary(std::string_view body, bool c
 Result<std::string> encode_request_binary(const DeformationRequest& request) {
   return decoding([&]() -> std::string {
     if (!request.fits_binary_layout()) {
-      bad("the request uses JSON-only fields (limit constraints, surface forces, surface load or pressure); "
-          "use the JSON format");
+      bad("the request uses JSON-only fields (limit constraints, surface forces, surface load, pressure or the "
+          "nonlinear model); use the JSON format");
     }
     ByteWriter out;
     out.u32(checked_count(request.vertex_constraints.size(), "vertex constraints"));

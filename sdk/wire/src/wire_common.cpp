@@ -1,4 +1,5 @@
 // Format-independent parts of the wire layer: media types, HTTP statuses, request validation.
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <string>
@@ -33,6 +34,7 @@ int http_status(ErrorCode code) {
     case ErrorCode::kPayloadTooLarge: return 413;
     case ErrorCode::kUnsupportedMediaType: return 415;
     case ErrorCode::kUnprocessable: return 422;
+    case ErrorCode::kConflict: return 409;
     case ErrorCode::kCancelled: return 499;  // the client went away (nginx's convention)
     case ErrorCode::kResourceExhausted: return 507;
     case ErrorCode::kUnavailable: return 503;
@@ -49,6 +51,7 @@ ErrorCode error_code_for_status(int status) {
     case 406: return ErrorCode::kNotAcceptable;
     case 413: return ErrorCode::kPayloadTooLarge;
     case 415: return ErrorCode::kUnsupportedMediaType;
+    case 409: return ErrorCode::kConflict;
     case 422: return ErrorCode::kUnprocessable;
     case 499: return ErrorCode::kCancelled;
     case 502:
@@ -60,6 +63,40 @@ ErrorCode error_code_for_status(int status) {
   if (status >= 200 && status < 300) return ErrorCode::kOk;
   if (status >= 400 && status < 500) return ErrorCode::kInvalidArgument;
   return ErrorCode::kInternal;
+}
+
+Result<void> check_hold_id(std::string_view hold_id) {
+  auto allowed = [](char c) {
+    return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' || c == '_' ||
+           c == '-';
+  };
+  if (hold_id.empty() || hold_id.size() > kMaxHoldIdLength ||
+      !std::all_of(hold_id.begin(), hold_id.end(), allowed)) {
+    std::string shown(hold_id.substr(0, 70));
+    for (char& c : shown) c = allowed(c) ? c : '?';
+    return Error{ErrorCode::kInvalidArgument, "a hold id is 1 to " + std::to_string(kMaxHoldIdLength) +
+                                                  " characters of A-Z, a-z, 0-9, '.', '_' and '-'; got '" + shown +
+                                                  (hold_id.size() > 70 ? "...'" : "'") + " (" +
+                                                  std::to_string(hold_id.size()) + " characters)"};
+  }
+  return {};
+}
+
+std::string_view to_string(HoldStateStatus state) {
+  switch (state) {
+    case HoldStateStatus::kSolved: return "solved";
+    case HoldStateStatus::kSolving: return "solving";
+    case HoldStateStatus::kUnsolvable: return "unsolvable";
+  }
+  return "solved";
+}
+
+Result<HoldStateStatus> parse_hold_state(std::string_view name) {
+  if (name == "solved") return HoldStateStatus::kSolved;
+  if (name == "solving") return HoldStateStatus::kSolving;
+  if (name == "unsolvable") return HoldStateStatus::kUnsolvable;
+  return Error{ErrorCode::kInvalidArgument,
+               "unknown hold state '" + std::string(name.substr(0, 40)) + "' (solved, solving, unsolvable)"};
 }
 
 }  // namespace softshell::wire

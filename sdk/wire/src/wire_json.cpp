@@ -1,5 +1,8 @@
 // JSON layouts of PROTOCOL.md (and the documented extensions).
 //
+// (Long, on purpose: every JSON body's reader and writer side by side, sharing one set of strict
+// field readers, so a layout's rules and its error messages live in one place.)
+//
 // Request bodies (uploads, deformation requests) are strict: unknown fields are an error, so a
 // typo never silently changes a simulation. Response bodies are lenient: unknown fields are
 // ignored, so clients keep working against newer servers.
@@ -223,6 +226,12 @@ GeomId geom_id(const json& j, const std::string& path) {
   return *id;
 }
 
+DeformationModel deformation_model(const json& j, const std::string& path) {
+  auto model = parse_deformation_model(text(j, path));
+  if (!model) bad(where(path) + ": " + model.error().message);
+  return *model;
+}
+
 SurfacePoint surface_point(const json& obj, const std::string& path, std::string_view face_key) {
   SurfacePoint p;
   p.face = index(require(obj, face_key, path), join(path, face_key));
@@ -341,7 +350,7 @@ Error decode_error_json(std::string_view body, int http_status) {
         if (const json* m = find(j, "message"); m && m->is_string()) error.message = m->get<std::string>();
         if (const json* c = find(j, "error"); c && c->is_string()) {
           const std::string code = c->get<std::string>();
-          for (int k = 0; k <= static_cast<int>(ErrorCode::kInternal); ++k) {
+          for (int k = 0; k <= static_cast<int>(ErrorCode::kConflict); ++k) {
             if (to_string(static_cast<ErrorCode>(k)) == code) error.code = static_cast<ErrorCode>(k);
           }
         }
@@ -533,6 +542,7 @@ std::string encode_request_json(const DeformationRequest& request) {
   }
   if (!request.surface_load.isZero(0.0)) out.raw(",\"surface_load\":").vec3(request.surface_load);
   if (request.pressure != 0.0) out.raw(",\"pressure\":").number(request.pressure);
+  if (request.model == DeformationModel::kNonlinear) out.raw(",\"model\":\"nonlinear\"");
   out.raw("}");
   return out.take();
 }
@@ -543,7 +553,7 @@ Result<DeformationRequest> decode_request_json(std::string_view body) {
     object(root, "");
     known_keys(root,
                {"vertex_constraints", "lagrange_constraints", "forces", "limit_constraints", "surface_forces",
-                "surface_load", "pressure"},
+                "surface_load", "pressure", "model"},
                "");
     DeformationRequest r;
     if (const json* list = find(root, "vertex_constraints")) {
@@ -633,6 +643,7 @@ Result<DeformationRequest> decode_request_json(std::string_view body) {
     }
     if (const json* q = find(root, "surface_load")) r.surface_load = vec3(*q, "surface_load");
     if (const json* p = find(root, "pressure")) r.pressure = number(*p, "pressure");
+    if (const json* m = find(root, "model")) r.model = deformation_model(*m, "model");
     return r;
   });
 }
@@ -643,7 +654,12 @@ Result<DeformationRequest> decode_request_json(std::string_view body) {
 std::string encode_result_json(const DeformationResult& result) {
   JsonOut out;
   out.raw("{\"res_id\":").integer(result.res_id).raw(",\"positions\":");
-  out.array(result.positions, [&](const Vec3& p) { out.vec3(p); }).raw("}");
+  out.array(result.positions, [&](const Vec3& p) { out.vec3(p); });
+  if (result.model == DeformationModel::kNonlinear) {
+    out.raw(",\"model\":\"nonlinear\",\"iterations\":").integer(result.iterations);
+    out.raw(",\"residual\":").number(result.residual);
+  }
+  out.raw("}");
   return out.take();
 }
 
@@ -661,6 +677,11 @@ Result<DeformationResult> decode_result_json(std::string_view body, std::optiona
     }
     r.positions.reserve(pos.size());
     for (size_t i = 0; i < pos.size(); ++i) r.positions.push_back(vec3(pos[i], item("positions", i)));
+    if (const json* m = find(root, "model")) r.model = deformation_model(*m, "model");
+    if (const json* k = find(root, "iterations")) {
+      r.iterations = static_cast<int32_t>(integer(*k, "iterations", 0, std::numeric_limits<int32_t>::max()));
+    }
+    if (const json* q = find(root, "residual")) r.residual = number(*q, "residual");
     return r;
   });
 }
@@ -713,6 +734,118 @@ Result<LimitComb> decode_limit_comb_json(std::string_view body) {
       for (size_t i = 0; i < w.size(); ++i) out->push_back(number(w[i], item(key, i)));
     }
     return c;
+  });
+}
+
+// ---------------------------------------------------------------------------------------------
+// Holds (PROTOCOL.md version 2)
+
+std::string encode_result_json(const DeformationResult& result, const HoldVersions& holds) {
+  JsonOut out;
+  out.raw("{\"res_id\":").integer(result.res_id).raw(",\"positions\":");
+  out.array(result.positions, [&](const Vec3& p) { out.vec3(p); }).raw(",\"holds\":{");
+  for (size_t i = 0; i < holds.size(); ++i) {
+    if (i) out.raw(",");
+    out.key(holds[i].first).integer(static_cast<int64_t>(holds[i].second));
+  }
+  out.raw("}}");
+  return out.take();
+}
+
+Result<HeldResult> decode_held_result_json(std::string_view body, std::optional<int32_t> expected_vertices) {
+  auto result = decode_result_json(body, expected_vertices);
+  if (!result) return result.error();
+  return decoding([&]() -> HeldResult {
+    HeldResult r{std::move(*result), std::nullopt};
+    const json root = parse(body);
+    if (const json* h = find(root, "holds")) {
+      object(*h, "holds");
+      HoldVersions versions;
+      for (auto it = h->begin(); it != h->end(); ++it) {
+        versions.emplace_back(it.key(), static_cast<uint64_t>(integer(it.value(), join("holds", it.key()), 0,
+                                                                      std::numeric_limits<int64_t>::max())));
+      }
+      r.holds = std::move(versions);
+    }
+    return r;
+  });
+}
+
+std::string encode_hold_accepted_json(std::string_view hold_id, uint64_t version) {
+  JsonOut out;
+  out.raw("{").key("hold_id").string(hold_id).raw(",").key("version").integer(static_cast<int64_t>(version)).raw("}");
+  return out.take();
+}
+
+namespace {
+
+HoldInfo hold_info(const json& j, const std::string& path, bool with_expiry) {
+  object(j, path);
+  HoldInfo h;
+  h.hold_id = text(require(j, "hold_id", path), join(path, "hold_id"));
+  h.version = static_cast<uint64_t>(
+      integer(require(j, "version", path), join(path, "version"), 0, std::numeric_limits<int64_t>::max()));
+  if (with_expiry) h.expires_in = number(require(j, "expires_in", path), join(path, "expires_in"));
+  return h;
+}
+
+void write_hold_info(JsonOut& out, const HoldInfo& h) {
+  out.key("hold_id").string(h.hold_id).raw(",").key("version").integer(static_cast<int64_t>(h.version));
+  out.raw(",").key("expires_in").number(h.expires_in);
+}
+
+}  // namespace
+
+Result<HoldInfo> decode_hold_accepted_json(std::string_view body) {
+  return decoding([&]() -> HoldInfo { return hold_info(parse(body), "", false); });
+}
+
+std::string encode_hold_list_json(const HoldList& list) {
+  JsonOut out;
+  out.raw("{\"holds\":").array(list.holds, [&](const HoldInfo& h) {
+    out.raw("{");
+    write_hold_info(out, h);
+    out.raw("}");
+  });
+  out.raw(",\"res_id\":").integer(list.res_id).raw(",\"state\":").string(to_string(list.state));
+  out.raw(",\"message\":").string(list.message).raw("}");
+  return out.take();
+}
+
+Result<HoldList> decode_hold_list_json(std::string_view body) {
+  return decoding([&]() -> HoldList {
+    const json root = parse(body);
+    object(root, "");
+    HoldList list;
+    const json& holds = array(require(root, "holds", ""), "holds");
+    for (size_t i = 0; i < holds.size(); ++i) list.holds.push_back(hold_info(holds[i], item("holds", i), true));
+    list.res_id = static_cast<uint32_t>(
+        integer(require(root, "res_id", ""), "res_id", 0, std::numeric_limits<uint32_t>::max()));
+    auto state = parse_hold_state(text(require(root, "state", ""), "state"));
+    if (!state) throw Exception(state.error());
+    list.state = *state;
+    if (const json* m = find(root, "message")) list.message = text(*m, "message");
+    return list;
+  });
+}
+
+std::string encode_hold_json(const HoldDetail& hold) {
+  JsonOut out;
+  out.raw("{");
+  write_hold_info(out, hold.info);
+  out.raw(",\"request\":").raw(encode_request_json(hold.request)).raw("}");
+  return out.take();
+}
+
+Result<HoldDetail> decode_hold_json(std::string_view body) {
+  return decoding([&]() -> HoldDetail {
+    const json root = parse(body);
+    HoldDetail d;
+    d.info = hold_info(root, "", true);
+    auto request = decode_request_json(object(require(root, "request", ""), "request").dump());
+    if (!request) throw Exception(request.error().code, "'request': " + request.error().message);
+    d.request = std::move(*request);
+    return d;
   });
 }
 
@@ -894,6 +1027,13 @@ Result<GeometryStatus> parse_geometry_status(std::string_view name) {
   if (name == "failed") return GeometryStatus::kFailed;
   return Error{ErrorCode::kInvalidArgument,
                "unknown geometry status '" + std::string(name.substr(0, 40)) + "' (precomputing, ready, failed)"};
+}
+
+Result<DeformationModel> parse_deformation_model(std::string_view name) {
+  if (name == "linear") return DeformationModel::kLinear;
+  if (name == "nonlinear") return DeformationModel::kNonlinear;
+  return Error{ErrorCode::kInvalidArgument,
+               "unknown model '" + std::string(name.substr(0, 40)) + "'; the models are linear and nonlinear"};
 }
 
 }  // namespace softshell::wire

@@ -232,6 +232,7 @@ bool CholeskyFactor::State::sparse_forward(const Eigen::MatrixXd& rhs, Eigen::Ma
     const Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> block(values + px[s], nrows, ncols,
                                                                             Eigen::OuterStride<>(nrows));
     auto xs = x.middleRows(k1, ncols);
+    if (xs.size() == 0) continue;  // no right-hand sides (an empty triangular solve is UB in Eigen)
     block.topRows(ncols).triangularView<Eigen::Lower>().solveInPlace(xs);
     if (nrows == ncols) continue;
     update.noalias() = block.bottomRows(nrows - ncols) * xs;

@@ -15,6 +15,14 @@ namespace {
 // handles redundancy. 1e-8 keeps cond(N) <= 1e8 on the kept rows.
 constexpr double kDeferPivot = 1e-8;
 
+// b <- L^-1 b. Eigen's triangular solve takes the address of the first coefficient, which an
+// empty matrix does not have (UBSan: reference binding to null), so empty systems return here.
+template <typename Lower, typename Rhs>
+void solve_lower_in_place(const Lower& l, Rhs&& b) {
+  if (l.rows() == 0 || b.size() == 0) return;
+  l.template triangularView<Eigen::Lower>().solveInPlace(b);
+}
+
 uint64_t mix(uint64_t h, uint64_t x) {
   x += 0x9e3779b97f4a7c15ULL + (h << 6) + (h >> 2);
   x ^= x >> 30;
@@ -170,7 +178,7 @@ std::shared_ptr<const ConstraintBlock> extend_block(const Factorization& factor,
     const double diagonal = n_new(e, e);
     Eigen::VectorXd v(nk);
     for (Eigen::Index k = 0; k < nk; ++k) v[k] = n_with(kept[static_cast<size_t>(k)], e);
-    l.topLeftCorner(nk, nk).triangularView<Eigen::Lower>().solveInPlace(v);
+    solve_lower_in_place(l.topLeftCorner(nk, nk), v);
     const double pivot = diagonal - v.squaredNorm();
     if (diagonal > 0.0 && pivot > kDeferPivot * diagonal) {
       l.block(nk, 0, 1, nk) = v.transpose();
@@ -212,7 +220,8 @@ std::shared_ptr<const ConstraintBlock> extend_block(const Factorization& factor,
       block->a_cc(c, c2) = block->a_cc(c2, c) = value;
     }
   }
-  block->w = block->l.triangularView<Eigen::Lower>().solve(block->s_kc);
+  block->w = block->s_kc;
+  solve_lower_in_place(block->l, block->w);
   block->t = block->a_cc;
   block->t.noalias() += block->w.transpose() * block->w;
   block->bytes = sizeof(ConstraintBlock) + block->groups.back()->bytes() +
@@ -247,7 +256,8 @@ SchurSystem::SchurSystem(const Factorization& factor, std::shared_ptr<const Cons
   for (Eigen::Index k = 0; k < nk; ++k) s_kg.row(k) = -cross.row(b.kept[static_cast<size_t>(k)]);
   s_cg.topRows(nq_) = s_qg;
   for (size_t d = 0; d < b.deferred.size(); ++d) s_cg.row(nq_ + static_cast<Eigen::Index>(d)) = -cross.row(b.deferred[d]);
-  w_new_ = nk ? Eigen::MatrixXd(b.l.triangularView<Eigen::Lower>().solve(s_kg)) : Eigen::MatrixXd(0, ng_);
+  w_new_ = s_kg;
+  solve_lower_in_place(b.l, w_new_);
 
   Eigen::MatrixXd t(nc + ng_, nc + ng_);
   t.topLeftCorner(nc, nc) = b.t;
@@ -280,7 +290,7 @@ Eigen::VectorXd SchurSystem::solve(const Eigen::VectorXd& r) const {
   for (size_t d = 0; d < b.deferred.size(); ++d) rhs[nq_ + static_cast<Eigen::Index>(d)] = r[nq_ + b.deferred[d]];
   rhs.tail(ng_) = r.tail(ng_);
   Eigen::VectorXd w_r = r_kept;
-  if (nk) b.l.triangularView<Eigen::Lower>().solveInPlace(w_r);
+  solve_lower_in_place(b.l, w_r);
   rhs.head(nc).noalias() += b.w.transpose() * w_r;
   rhs.tail(ng_).noalias() += w_new_.transpose() * w_r;
   Eigen::VectorXd x = rhs.size() ? Eigen::VectorXd(scale_.asDiagonal() * reduced_.solve(scale_.asDiagonal() * rhs))
@@ -289,7 +299,7 @@ Eigen::VectorXd SchurSystem::solve(const Eigen::VectorXd& r) const {
   Eigen::VectorXd y_kept = -w_r;
   y_kept.noalias() += b.w * x.head(nc);
   y_kept.noalias() += w_new_ * x.tail(ng_);
-  if (nk) b.l.transpose().triangularView<Eigen::Upper>().solveInPlace(y_kept);
+  if (nk && y_kept.size()) b.l.transpose().triangularView<Eigen::Upper>().solveInPlace(y_kept);
   Eigen::VectorXd y(nq_ + nb + ng_);
   y.head(nq_) = x.head(nq_);
   for (size_t d = 0; d < b.deferred.size(); ++d) y[nq_ + b.deferred[d]] = x[nq_ + static_cast<Eigen::Index>(d)];

@@ -1,5 +1,6 @@
 #include "quadrature.h"
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 
@@ -38,10 +39,12 @@ IrregularCorners::IrregularCorners(const ControlMesh& mesh) : mesh_(mesh) {
   const auto n = static_cast<size_t>(mesh.num_vertices());
   std::vector<int32_t> faces_around(n, 0);
   std::map<std::pair<int32_t, int32_t>, int> edge_faces;
+  next_to_non_quad_.assign(n, 0);
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     auto fv = mesh.face(f);
     for (size_t i = 0; i < fv.size(); ++i) {
       ++faces_around[static_cast<size_t>(fv[i])];
+      if (fv.size() != 4) next_to_non_quad_[static_cast<size_t>(fv[i])] = 1;
       const int32_t a = fv[i], b = fv[(i + 1) % fv.size()];
       ++edge_faces[{std::min(a, b), std::max(a, b)}];
     }
@@ -70,7 +73,9 @@ uint8_t IrregularCorners::corners(int32_t face, int32_t subface) const {
   if (fv.size() == 4) {
     uint8_t mask = 0;
     for (int c = 0; c < 4; ++c) {
-      if (irregular_vertex_[static_cast<size_t>(fv[static_cast<size_t>(c)])]) mask |= static_cast<uint8_t>(1u << c);
+      const auto v = static_cast<size_t>(fv[static_cast<size_t>(c)]);
+      if (irregular_vertex_[v]) mask |= static_cast<uint8_t>(1u << c);
+      if (next_to_non_quad_[v]) mask |= kSplitOnce;
     }
     return mask;
   }
@@ -103,12 +108,41 @@ void refine(const Cell& cell, int levels, uint8_t mask, std::vector<Cell>& out) 
 
 std::array<Cell, 4> split(const Cell& cell) {
   const double h = 0.5 * cell.size;
-  return {{{cell.u0, cell.v0, h}, {cell.u0 + h, cell.v0, h}, {cell.u0 + h, cell.v0 + h, h}, {cell.u0, cell.v0 + h, h}}};
+  std::array<Cell, 4> out;
+  out[0].u0 = cell.u0, out[0].v0 = cell.v0;
+  out[1].u0 = cell.u0 + h, out[1].v0 = cell.v0;
+  out[2].u0 = cell.u0 + h, out[2].v0 = cell.v0 + h;
+  out[3].u0 = cell.u0, out[3].v0 = cell.v0 + h;
+  for (Cell& c : out) c.size = h;
+  if (cell.ev_corner >= 0) {  // the quarter at the corner (quarter k sits at corner k)
+    Cell& at_corner = out[static_cast<size_t>(cell.ev_corner)];
+    at_corner.ev_corner = cell.ev_corner;
+    at_corner.weight_factors = cell.weight_factors;
+  }
+  return out;
 }
 
-void face_cells(int levels, uint8_t corner_mask, std::vector<Cell>& out) {
+void face_cells(const LimitEvaluator& evaluator, int32_t face, int32_t subface, int gauss_points, int levels,
+                uint8_t corner_mask, std::vector<Cell>& out) {
   out.clear();
-  refine(Cell{0.0, 0.0, 1.0}, corner_mask ? levels : 0, corner_mask, out);
+  const auto corners = static_cast<uint8_t>(corner_mask & 0xfu);
+  if ((corner_mask & kSplitOnce) && !(corners && levels > 0)) {
+    for (const Cell& quarter : split(Cell{})) out.push_back(quarter);
+  } else {
+    refine(Cell{}, corners ? levels : 0, corners, out);
+  }
+  // The cells at an extraordinary corner.
+  for (Cell& cell : out) {
+    for (int c = 0; c < 4; ++c) {
+      if (!(corners & (1u << c))) continue;
+      const double cu = (c == 1 || c == 2) ? 1.0 : 0.0, cv = (c >= 2) ? 1.0 : 0.0;
+      const bool at = (cell.u0 == cu || cell.u0 + cell.size == cu) && (cell.v0 == cv || cell.v0 + cell.size == cv);
+      if (at && evaluator.ev_corner_weights(face, subface, c, cell.size, gauss_points, cell.weight_factors)) {
+        cell.ev_corner = c;
+        break;
+      }
+    }
+  }
 }
 
 void cell_points(const std::vector<Cell>& cells, const std::vector<double>& gauss_points,
@@ -116,14 +150,40 @@ void cell_points(const std::vector<Cell>& cells, const std::vector<double>& gaus
                  std::vector<double>& out_weight) {
   out_uv.clear();
   out_weight.clear();
+  const size_t g = gauss_points.size();
   for (const Cell& cell : cells) {
-    for (size_t j = 0; j < gauss_points.size(); ++j) {
-      for (size_t i = 0; i < gauss_points.size(); ++i) {
+    const bool factors = cell.weight_factors.size() == g * g;
+    for (size_t j = 0; j < g; ++j) {
+      for (size_t i = 0; i < g; ++i) {
         out_uv.push_back({cell.u0 + cell.size * gauss_points[i], cell.v0 + cell.size * gauss_points[j]});
-        out_weight.push_back(cell.size * cell.size * gauss_weights[i] * gauss_weights[j]);
+        out_weight.push_back(cell.size * cell.size * gauss_weights[i] * gauss_weights[j] *
+                             (factors ? cell.weight_factors[i + g * j] : 1.0));
       }
     }
   }
+}
+
+Eigen::Matrix3Xd exact_corner_normal_weights(const LimitEvaluator& evaluator, int32_t face, int32_t subface,
+                                             const std::vector<Cell>& cells, const std::vector<int32_t>& indices,
+                                             std::vector<char>& exact) {
+  Eigen::Matrix3Xd sum = Eigen::Matrix3Xd::Zero(3, static_cast<Eigen::Index>(indices.size()));
+  exact.assign(cells.size(), 0);
+  std::vector<int32_t> support;
+  Eigen::Matrix3Xd cell_weights;
+  for (size_t c = 0; c < cells.size(); ++c) {
+    const Cell& cell = cells[c];
+    if (cell.ev_corner < 0 || !evaluator.ev_corner_normal_weights(face, subface, cell.ev_corner, cell.size,
+                                                                  evaluator.mesh().positions(), cell_weights)) {
+      continue;
+    }
+    if (support.empty()) support = evaluator.support(face);
+    for (size_t k = 0; k < support.size(); ++k) {
+      const auto column = std::find(indices.begin(), indices.end(), support[k]) - indices.begin();
+      sum.col(column) += cell_weights.col(static_cast<Eigen::Index>(k));
+    }
+    exact[c] = 1;
+  }
+  return sum;
 }
 
 }  // namespace softshell::engine::internal

@@ -3,13 +3,17 @@
 //
 // Regular faces are bicubic patches: one Gauss rule over the face. Faces next to an extraordinary
 // vertex (EV) or a sharp feature are piecewise polynomial on dyadic sub-squares that shrink toward
-// that corner (Bfr's patch tree), so the domain is split dyadically toward every irregular corner
-// and each cell gets its own Gauss rule. Cells whose parametrization is strongly non-uniform are
+// that corner (the rings of the exact evaluation), so the domain is split dyadically toward every
+// irregular corner and each cell gets its own Gauss rule. Quads whose corners are regular but
+// touch a non-quad face are 2 x 2 bicubic pieces (the children of one subdivision step): they are
+// split once. Cells whose parametrization is strongly non-uniform are
 // split further by the integration itself (shell_model.cpp), which sees the geometry.
 
 #include <array>
 #include <cstdint>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "softshell/control_mesh.h"
 #include "softshell/engine/shell_model.h"
@@ -21,7 +25,10 @@ namespace softshell::engine::internal {
 void gauss_legendre_01(int n, std::vector<double>& points, std::vector<double>& weights);
 
 /// Which corners of each (face, sub-face) domain need refinement: bit c set for corner c in the
-/// protocol's order (0 = (0,0), 1 = (1,0), 2 = (1,1), 3 = (0,1)).
+/// protocol's order (0 = (0,0), 1 = (1,0), 2 = (1,1), 3 = (0,1)); kSplitOnce set for a quad that
+/// is 2 x 2 polynomial pieces (a corner touches a non-quad face).
+inline constexpr uint8_t kSplitOnce = 1u << 4;
+
 class IrregularCorners {
  public:
   explicit IrregularCorners(const ControlMesh& mesh);
@@ -30,24 +37,38 @@ class IrregularCorners {
  private:
   const ControlMesh& mesh_;
   std::vector<char> irregular_vertex_;  // per control point
+  std::vector<char> next_to_non_quad_;  // per control point: one of its faces is not a quad
 };
 
 /// A square [u0, u0 + size] x [v0, v0 + size] of a (sub-)face's parameter domain.
 struct Cell {
   double u0 = 0.0, v0 = 0.0, size = 1.0;
+  /// A cell at an extraordinary corner (which holds infinitely many polynomial rings): the
+  /// corner (0..3) and the factors of its Gauss weights (LimitEvaluator::ev_corner_weights).
+  int ev_corner = -1;
+  std::vector<double> weight_factors;
 };
 
-/// Its four quarters.
+/// Its four quarters (the one at an extraordinary corner keeps the corner's weight factors).
 std::array<Cell, 4> split(const Cell& cell);
 
 /// The cells of one (sub-)face: the unit square split dyadically `levels` times toward each
-/// corner in `corner_mask`. Their areas sum to 1.
-void face_cells(int levels, uint8_t corner_mask, std::vector<Cell>& out);
+/// corner in `corner_mask`, and at least once if it has kSplitOnce. Their areas sum to 1. The
+/// cells at an extraordinary corner get the evaluator's weight factors for `gauss_points`.
+void face_cells(const LimitEvaluator& evaluator, int32_t face, int32_t subface, int gauss_points, int levels,
+                uint8_t corner_mask, std::vector<Cell>& out);
 
 /// The tensor Gauss rule (points and weights on [0, 1]) on each cell, cell after cell; the
-/// weights include the cell's area.
+/// weights include the cell's area (and its weight factors).
 void cell_points(const std::vector<Cell>& cells, const std::vector<double>& gauss_points,
                  const std::vector<double>& gauss_weights, std::vector<std::array<double, 2>>& out_uv,
                  std::vector<double>& out_weight);
+
+/// The pressure load (integral of N_A n dA, 3 x indices.size(), columns for the control points
+/// `indices`) of the cells at extraordinary corners, exactly (LimitEvaluator::
+/// ev_corner_normal_weights: no point rule integrates it there); `exact[c]` set for those cells.
+Eigen::Matrix3Xd exact_corner_normal_weights(const LimitEvaluator& evaluator, int32_t face, int32_t subface,
+                                             const std::vector<Cell>& cells, const std::vector<int32_t>& indices,
+                                             std::vector<char>& exact);
 
 }  // namespace softshell::engine::internal

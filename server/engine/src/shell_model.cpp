@@ -62,7 +62,8 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
   // The cells: dyadic toward extraordinary corners, then split where the parametrization is far
   // from uniform, one round of stencil evaluations per split level.
   std::vector<internal::Cell> cells, accepted, next;
-  internal::face_cells(quad.ev_refinement_levels, work.corner_mask, cells);
+  internal::face_cells(evaluator, work.face, work.subface, quad.gauss_points, quad.ev_refinement_levels,
+                       work.corner_mask, cells);
   std::vector<std::array<double, 2>> uvs;
   std::vector<double> weights;
   Eigen::MatrixXd basis;
@@ -83,7 +84,9 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
     }
     next.clear();
     for (size_t c = 0; c < cells.size(); ++c) {
-      if (cell_distortion(basis, x, static_cast<Eigen::Index>(c) * per_cell, per_cell) > quad.max_cell_distortion) {
+      // Cells at an extraordinary vertex are never uniform; their rule is made for them.
+      if (cells[c].ev_corner < 0 &&
+          cell_distortion(basis, x, static_cast<Eigen::Index>(c) * per_cell, per_cell) > quad.max_cell_distortion) {
         const auto quarters = internal::split(cells[c]);
         next.insert(next.end(), quarters.begin(), quarters.end());
       } else {
@@ -101,11 +104,13 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
   const auto m = x.rows();
 
   out.area_weights.setZero(m);
-  out.normal_weights.setZero(3, m);
   out.points.clear();
   out.area = 0.0;
   const double t = material.thickness;
   const double membrane = t, bending = t * t * t / 12.0;
+  std::vector<char> exact_load;  // cells at an extraordinary vertex: their pressure load exactly
+  out.normal_weights = internal::exact_corner_normal_weights(evaluator, work.face, work.subface, accepted, out.indices,
+                                                             exact_load);
   internal::SurfaceFrame frame;
   // K_e = sum over points of dA (Bm^T t C Bm + Bb^T t^3/12 C Bb). With C = L L^T, every term is
   // G_q^T G_q for G_q = [sqrt(dA t) L^T Bm; sqrt(dA t^3/12) L^T Bb]: the rows of all points are
@@ -130,7 +135,7 @@ void integrate_element(const LimitEvaluator& evaluator, const Material& material
     internal::weighted_strain_rows(w, frame, std::sqrt(dA * membrane) * lt, std::sqrt(dA * bending) * lt,
                                    g.middleRows(static_cast<Eigen::Index>(6 * q), 6));
     out.area_weights.noalias() += dA * w.row(0).transpose();
-    out.normal_weights.noalias() += frame.a3 * (dA * w.row(0));
+    if (!exact_load[q / static_cast<size_t>(per_cell)]) out.normal_weights.noalias() += frame.a3 * (dA * w.row(0));
     out.area += dA;
     out.points.push_back({SurfacePoint{work.face, work.subface, uvs[q][0], uvs[q][1]}, weights[q]});
   }

@@ -12,4 +12,7 @@ namespace softshell::engine::internal {
 using FastPathCorruption = void (*)(Eigen::VectorXd& displacement);
 extern std::atomic<FastPathCorruption> g_corrupt_fast_path;
 
+/// The same for every answer of the nonlinear solver, just before its final check.
+extern std::atomic<FastPathCorruption> g_corrupt_nonlinear_answer;
+
 }  // namespace softshell::engine::internal

@@ -1,5 +1,6 @@
 #include "softshell/engine/stresses.h"
 
+#include <array>
 #include <cmath>
 #include <map>
 #include <string>
@@ -13,12 +14,27 @@ double von_mises(const Eigen::Vector3d& s) {  // plane stress [s11, s22, s12]
   return std::sqrt(std::max(0.0, s[0] * s[0] + s[1] * s[1] - s[0] * s[1] + 3.0 * s[2] * s[2]));
 }
 
+// At an extraordinary vertex itself the curvature of the limit surface, and of every basis
+// function, vanishes or diverges: the stress there is taken 2^-10 inside the face (the membrane
+// part is continuous; the bending part is that of the field next to the vertex).
+std::array<double, 2> stress_point(const LimitEvaluator& evaluator, int32_t face, int32_t subface, std::array<double, 2> uv) {
+  const bool corner_u = uv[0] == 0.0 || uv[0] == 1.0, corner_v = uv[1] == 0.0 || uv[1] == 1.0;
+  if (!corner_u || !corner_v) return uv;
+  const int corner = uv[1] == 0.0 ? (uv[0] == 0.0 ? 0 : 1) : (uv[0] == 1.0 ? 2 : 3);
+  std::vector<double> unused;
+  if (!evaluator.ev_corner_weights(face, subface, corner, 0.5, 1, unused)) return uv;
+  constexpr double kInside = 1.0 / 1024.0;
+  return {uv[0] == 0.0 ? kInside : 1.0 - kInside, uv[1] == 0.0 ? kInside : 1.0 - kInside};
+}
+
 // Stresses at the points `uvs` of one (sub-)face.
 void face_stresses(const ShellModel& model, const Eigen::VectorXd& u, int32_t face, int32_t subface,
                    const std::vector<std::array<double, 2>>& uvs, std::vector<StressSample>& out) {
   std::vector<int32_t> indices;
   Eigen::MatrixXd basis;
-  model.evaluator().face_stencils(face, subface, uvs, indices, basis);
+  std::vector<std::array<double, 2>> at(uvs.size());
+  for (size_t q = 0; q < uvs.size(); ++q) at[q] = stress_point(model.evaluator(), face, subface, uvs[q]);
+  model.evaluator().face_stencils(face, subface, at, indices, basis);
   const auto m = static_cast<Eigen::Index>(indices.size());
   Eigen::MatrixX3d x(m, 3);
   Eigen::VectorXd local(3 * m);
@@ -38,7 +54,7 @@ void face_stresses(const ShellModel& model, const Eigen::VectorXd& u, int32_t fa
     const auto w = basis.middleRows(static_cast<Eigen::Index>(6 * q), 6);
     StressSample s;
     s.point = SurfacePoint{face, subface, uvs[q][0], uvs[q][1]};
-    s.position = (w.row(0) * x).transpose();
+    s.position = at[q] == uvs[q] ? Vec3((w.row(0) * x).transpose()) : model.evaluator().evaluate(s.point).position;
     if (internal::compute_frame(w, x, mat.youngs_modulus, nu, frame)) {
       internal::strain_matrices(w, frame, bm, bb);
       const Eigen::Matrix3d to_cartesian = internal::cartesian_strain_transform(frame);

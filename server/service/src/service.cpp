@@ -1,39 +1,27 @@
+// Service: uploads, precomputation, deformations, the result history, long polls, stresses and limit
+// combinations (holds, subscriptions and metrics have their own files). (About 600 lines: the
+// geometry lifecycle and the solve path share the Impl helpers defined here.)
 #include "softshell/service/service.h"
 
 #include <unistd.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <condition_variable>
-#include <cstring>
-#include <mutex>
-#include <optional>
-#include <shared_mutex>
 #include <sstream>
 #include <thread>
-#include <unordered_map>
 
+#include "service_impl.h"
 #include "softshell/content_id.h"
+#include "softshell/engine/nonlinear_stresses.h"
+#include "softshell/engine/stresses.h"
 #include "softshell/mesh_validation.h"
 #include "softshell/request_validation.h"
 #include "softshell/tessellation.h"
-#include "softshell/engine/stresses.h"
 #include "softshell/wire.h"
-#include "task_pool.h"
 
 namespace softshell::service {
-namespace {
 
-using Clock = std::chrono::steady_clock;
-
-struct GeomIdHash {
-  size_t operator()(const GeomId& id) const noexcept {
-    size_t h = 0;
-    std::memcpy(&h, id.bytes.data(), sizeof h);  // the id is a cryptographic hash already
-    return h;
-  }
-};
+namespace internal {
 
 std::string megabytes(size_t bytes) {
   std::ostringstream s;
@@ -42,6 +30,49 @@ std::string megabytes(size_t bytes) {
   return s.str();
 }
 
+size_t request_bytes(const DeformationRequest& r) {
+  size_t bytes = sizeof(DeformationRequest) + r.vertex_constraints.size() * sizeof(VertexConstraint) +
+                 r.forces.size() * sizeof(PointForce) + r.limit_constraints.size() * sizeof(LimitConstraint) +
+                 r.surface_forces.size() * sizeof(SurfaceForce);
+  for (const auto& c : r.lagrange_constraints) {
+    bytes += sizeof(LagrangeConstraint) + c.indices.size() * sizeof(int32_t) + c.coefficients.size() * sizeof(Vec3);
+  }
+  return bytes;
+}
+
+Error not_found(const GeomId& id) {
+  return Error{ErrorCode::kNotFound, "no geometry with id " + id.hex() + " (upload it first with POST /geometries)"};
+}
+
+Error shutdown_error() { return Error{ErrorCode::kUnavailable, "the server is shutting down"}; }
+
+Error no_room(const MemoryBudget& budget, size_t bytes, const std::string& what) {
+  return Error{ErrorCode::kResourceExhausted, "the server's memory budget (" + megabytes(budget.budget()) + ", " +
+                                                  megabytes(budget.used()) + " in use) cannot hold " + what + " of " +
+                                                  megabytes(bytes) +
+                                                  "; what is stored is never dropped to make room (restart the server "
+                                                  "with a larger --store-mb)"};
+}
+
+GeometryInfo Entry::info_locked() const {
+  GeometryInfo info;
+  info.id = id;
+  info.name_space = geometry->name_space;
+  info.vertices = geometry->mesh.num_vertices();
+  info.faces = geometry->mesh.num_faces();
+  info.status = status;
+  info.results = static_cast<uint32_t>(results.size());
+  info.progress = status == GeometryStatus::kReady ? 1.0 : progress.load(std::memory_order_relaxed);
+  info.error = error;
+  return info;
+}
+
+}  // namespace internal
+
+namespace {
+
+using namespace internal;
+
 size_t physical_memory() {
   const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
   if (pages <= 0 || page <= 0) return size_t{4} << 30;
@@ -49,35 +80,6 @@ size_t physical_memory() {
 }
 
 int hardware_threads() { return std::max(1, static_cast<int>(std::thread::hardware_concurrency())); }
-
-// The memory budget of everything the service keeps. Reservations are exact byte counts of what
-// is stored (meshes, results) or estimates replaced by the real size (precomputed models).
-class MemoryBudget {
- public:
-  explicit MemoryBudget(size_t budget) : budget_(budget) {}
-  bool try_reserve(size_t bytes) {
-    std::lock_guard lock(mu_);
-    if (bytes > budget_ || used_ > budget_ - bytes) return false;
-    used_ += bytes;
-    return true;
-  }
-  // Replaces a reservation by another size, even beyond the budget (a model that turned out
-  // larger than estimated is kept; later requests are refused instead).
-  void resize(size_t from, size_t to) {
-    std::lock_guard lock(mu_);
-    used_ = used_ - std::min(used_, from) + to;
-  }
-  size_t used() const {
-    std::lock_guard lock(mu_);
-    return used_;
-  }
-  size_t budget() const { return budget_; }
-
- private:
-  mutable std::mutex mu_;
-  size_t used_ = 0;
-  const size_t budget_;
-};
 
 size_t mesh_bytes(const ControlMesh& mesh) {
   return sizeof(Geometry) + mesh.positions().size() * sizeof(Vec3) +
@@ -93,16 +95,6 @@ size_t model_estimate(const ControlMesh& mesh) {
   size_t subfaces = 0;
   for (int32_t f = 0; f < mesh.num_faces(); ++f) subfaces += mesh.face_size(f) == 4 ? 1 : static_cast<size_t>(mesh.face_size(f));
   return mesh.positions().size() * 49 * 9 * 12 + subfaces * 16 * 1024;
-}
-
-size_t request_bytes(const DeformationRequest& r) {
-  size_t bytes = sizeof(DeformationRequest) + r.vertex_constraints.size() * sizeof(VertexConstraint) +
-                 r.forces.size() * sizeof(PointForce) + r.limit_constraints.size() * sizeof(LimitConstraint) +
-                 r.surface_forces.size() * sizeof(SurfaceForce);
-  for (const auto& c : r.lagrange_constraints) {
-    bytes += sizeof(LagrangeConstraint) + c.indices.size() * sizeof(int32_t) + c.coefficients.size() * sizeof(Vec3);
-  }
-  return bytes;
 }
 
 Result<void> check_namespace(std::string_view ns) {
@@ -122,6 +114,10 @@ Result<void> check_namespace(std::string_view ns) {
   return {};
 }
 
+}  // namespace
+
+namespace {
+
 // Stress query points must lie on the limit surface; the message names the first that does not.
 Result<void> validate_points(const std::vector<SurfacePoint>& points, const LimitEvaluator& evaluator) {
   for (size_t k = 0; k < points.size(); ++k) {
@@ -132,234 +128,220 @@ Result<void> validate_points(const std::vector<SurfacePoint>& points, const Limi
   return {};
 }
 
-Error not_found(const GeomId& id) {
-  return Error{ErrorCode::kNotFound, "no geometry with id " + id.hex() + " (upload it first with POST /geometries)"};
-}
-
-Error shutdown_error() { return Error{ErrorCode::kUnavailable, "the server is shutting down"}; }
-
-using Pending = std::pair<DeformationRequest, Service::DeformCallback>;
-
-// One geometry and everything the service keeps for it.
-struct Entry {
-  GeomId id;
-  std::shared_ptr<const Geometry> geometry;
-
-  mutable std::mutex mu;  // guards everything below but `progress` and the evaluator
-  mutable std::condition_variable cv;  // notified when a result is stored or the status changes
-  GeometryStatus status = GeometryStatus::kPrecomputing;
-  std::string error;
-  size_t reserved_bytes = 0;  // mesh + model (estimate until built)
-  std::shared_ptr<const engine::ShellModel> model;
-  std::shared_ptr<const engine::Solver> solver;
-  std::vector<ResultPtr> results;  // results[k] has res_id k + 1
-  std::vector<Pending> pending;    // requests waiting for the precomputation
-
-  std::atomic<double> progress{0.0};
-
-  mutable std::mutex evaluator_mu;  // guards the lazily created evaluator
-  mutable std::optional<LimitEvaluator> evaluator;
-  mutable std::optional<Error> evaluator_error;
-
-  GeometryInfo info_locked() const {
-    GeometryInfo info;
-    info.id = id;
-    info.name_space = geometry->name_space;
-    info.vertices = geometry->mesh.num_vertices();
-    info.faces = geometry->mesh.num_faces();
-    info.status = status;
-    info.results = static_cast<uint32_t>(results.size());
-    info.progress = status == GeometryStatus::kReady ? 1.0 : progress.load(std::memory_order_relaxed);
-    info.error = error;
-    return info;
-  }
-};
-
 }  // namespace
 
-struct Service::Impl {
-  explicit Impl(const ServiceOptions& o)
-      : options(o),
-        cache(std::make_shared<engine::FactorCache>(o.cache_bytes)),
-        budget(o.store_bytes ? o.store_bytes : physical_memory() / 2),
-        precompute_pool(std::max(1, o.precompute_jobs)),
-        solve_pool(o.solve_threads > 0 ? o.solve_threads : hardware_threads()) {}
+Service::Impl::Impl(const ServiceOptions& o)
+    : options(o),
+      cache(std::make_shared<engine::FactorCache>(o.cache_bytes)),
+      budget(o.store_bytes ? o.store_bytes : physical_memory() / 2),
+      precompute_pool(std::max(1, o.precompute_jobs)),
+      solve_pool(o.solve_threads > 0 ? o.solve_threads : hardware_threads()) {}
 
-  std::shared_ptr<Entry> find(const GeomId& id) const {
-    std::shared_lock lock(registry_mu);
-    auto it = by_id.find(id);
-    return it == by_id.end() ? nullptr : it->second;
+std::shared_ptr<Entry> Service::Impl::find(const GeomId& id) const {
+  std::shared_lock lock(registry_mu);
+  auto it = by_id.find(id);
+  return it == by_id.end() ? nullptr : it->second;
+}
+
+std::vector<std::shared_ptr<Entry>> Service::Impl::all() const {
+  std::shared_lock lock(registry_mu);
+  return in_order;
+}
+
+Result<LimitEvaluator> Service::Impl::evaluator(const Entry& e) const {
+  {
+    std::lock_guard lock(e.mu);
+    if (e.model) return e.model->evaluator();
   }
-
-  std::vector<std::shared_ptr<Entry>> all() const {
-    std::shared_lock lock(registry_mu);
-    return in_order;
+  std::lock_guard lock(e.evaluator_mu);
+  if (!e.evaluator && !e.evaluator_error) {
+    // The same surface the model will have: the engine simulates the smooth limit surface of
+    // the control mesh, without crease and corner tags (ShellModel::build).
+    ControlMesh smooth = e.geometry->mesh;
+    smooth.creases().clear();
+    smooth.corners().clear();
+    auto created = capture([&] { return LimitEvaluator::create(smooth, options.precompute.evaluator); });
+    if (created) e.evaluator = std::move(*created);
+    else e.evaluator_error = created.error();
   }
+  if (e.evaluator_error) return *e.evaluator_error;
+  return *e.evaluator;
+}
 
-  // The limit evaluator of a geometry: the model's once built, before that one made on demand.
-  Result<LimitEvaluator> evaluator(const Entry& e) const {
+Result<void> Service::Impl::validate(const Entry& e, const DeformationRequest& request) const {
+  RequestContext context{e.geometry->mesh.num_vertices(), nullptr};
+  std::optional<LimitEvaluator> surface;
+  if (!request.limit_constraints.empty() || !request.surface_forces.empty()) {
+    auto made = evaluator(e);
+    if (!made) return made.error();
+    surface = std::move(*made);
+    context.evaluator = &*surface;
+  }
+  return validate_request(request, context);
+}
+
+void Service::Impl::start_precompute(const std::shared_ptr<Entry>& e) {
+  precompute_pool.submit([this, e] {
+    if (stopping.load()) {
+      finish_precompute(e, shutdown_error(), 0.0);
+      return;
+    }
+    const auto& g = *e->geometry;
+    options.logger.info("precomputing geometry " + e->id.hex() + " (" + std::to_string(g.mesh.num_vertices()) +
+                        " control points, " + std::to_string(g.mesh.num_faces()) + " faces)");
+    engine::PrecomputeOptions opts = options.precompute;
+    opts.threads = options.precompute_threads;
+    opts.progress = [e](double f) { e->progress.store(std::clamp(f, 0.0, 1.0), std::memory_order_relaxed); };
+    opts.cancel = &stopping;
+    precomputing_now.fetch_add(1);
+    const auto start = Clock::now();
+    auto model = capture([&] { return engine::ShellModel::build(g.mesh, g.material, opts); });
+    const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    precomputing_now.fetch_sub(1);
+    if (model && !*model) model = Error{ErrorCode::kInternal, "the precomputation returned no model"};
+    finish_precompute(e, std::move(model), seconds);
+  });
+}
+
+void Service::Impl::finish_precompute(const std::shared_ptr<Entry>& e,
+                                      Result<std::shared_ptr<const engine::ShellModel>> model, double seconds) {
+  std::vector<Pending> pending;
+  std::shared_ptr<const engine::Solver> solver;
+  std::string error;
+  bool launch_holds = false;
+  {
+    std::lock_guard lock(e->mu);
+    if (model) {
+      e->model = std::move(*model);
+      solver = std::make_shared<const engine::Solver>(e->model, cache);
+      e->solver = solver;
+      e->nonlinear = std::make_shared<const engine::NonlinearSolver>(e->model, cache);
+      precompute_hist.observe(seconds);  // before the status is visible: stats never lag it
+      e->status = GeometryStatus::kReady;
+      const size_t actual = mesh_bytes(e->geometry->mesh) + e->model->memory_bytes();
+      budget.resize(e->reserved_bytes, actual);
+      e->reserved_bytes = actual;
+      launch_holds = claim_hold_solve_locked(*e);  // hold changes made while it precomputed
+    } else {
+      e->status = GeometryStatus::kFailed;
+      e->error = model.error().message;
+      const size_t kept = mesh_bytes(e->geometry->mesh);
+      budget.resize(e->reserved_bytes, kept);
+      e->reserved_bytes = kept;
+      error = "the precomputation of geometry " + e->id.hex() + " failed: " + e->error;
+    }
+    pending.swap(e->pending);
+  }
+  e->cv.notify_all();
+  if (solver) {
+    options.logger.info("geometry " + e->id.hex() + " is ready (precomputed in " + std::to_string(seconds) + " s)");
+    for (auto& [request, done] : pending) submit_solve(e, solver, std::move(request), std::move(done));
+    if (launch_holds) launch_hold_solve(e);
+  } else {
+    const bool shutdown = model.error().code == ErrorCode::kUnavailable || model.error().code == ErrorCode::kCancelled;
+    if (!shutdown) options.logger.warning(error);
+    const Error failure = shutdown ? shutdown_error() : Error{ErrorCode::kUnprocessable, error};
+    for (auto& [request, done] : pending) done(failure);
+    fail_hold_waiters(*e, failure, /*drop_changes=*/true);
+  }
+}
+
+Result<ResultPtr> Service::Impl::store(Entry& e, std::shared_ptr<StoredResult> stored,
+                                       const std::function<void()>& locked) {
+  const size_t bytes = sizeof(StoredResult) + stored->positions.size() * sizeof(Vec3) + request_bytes(stored->request) +
+                       (stored->holds ? stored->holds->size() * (sizeof(std::pair<std::string, uint64_t>) + 16) : 0);
+  {
+    // The id is assigned here, under the geometry's lock, at the moment the result is stored:
+    // ids follow the storage order and none is skipped or reused.
+    std::lock_guard lock(e.mu);
+    if (!budget.try_reserve(bytes)) {
+      refused_no_memory.fetch_add(1);
+      return no_room(budget, bytes, "another result");
+    }
+    stored->res_id = static_cast<uint32_t>(e.results.size() + 1);
+    stored->stored_at = std::chrono::system_clock::now();
+    total_results.fetch_add(1);  // counters first, so that whoever sees the result also sees them
+    e.results.push_back(stored);
+    if (locked) locked();
+  }
+  e.cv.notify_all();
+  notify(e);
+  return ResultPtr(std::move(stored));
+}
+
+void Service::Impl::notify(Entry& e) {
+  std::lock_guard serial(e.notify_mu);
+  for (;;) {
+    ResultPtr result;
+    std::vector<std::shared_ptr<ListenerSlot>> listeners;
     {
       std::lock_guard lock(e.mu);
-      if (e.model) return e.model->evaluator();
+      if (e.notified >= e.results.size()) return;
+      result = e.results[e.notified++];
+      listeners = e.listeners;
     }
-    std::lock_guard lock(e.evaluator_mu);
-    if (!e.evaluator && !e.evaluator_error) {
-      // The same surface the model will have: the engine simulates the smooth limit surface of
-      // the control mesh, without crease and corner tags (ShellModel::build).
-      ControlMesh smooth = e.geometry->mesh;
-      smooth.creases().clear();
-      smooth.corners().clear();
-      auto created = capture([&] { return LimitEvaluator::create(smooth, options.precompute.evaluator); });
-      if (created) e.evaluator = std::move(*created);
-      else e.evaluator_error = created.error();
+    for (const auto& slot : listeners) {
+      std::lock_guard call(slot->mu);
+      if (slot->active) slot->fn(result);
     }
-    if (e.evaluator_error) return *e.evaluator_error;
-    return *e.evaluator;
   }
+}
 
-  void start_precompute(const std::shared_ptr<Entry>& e) {
-    precompute_pool.submit([this, e] {
-      if (stopping.load()) {
-        finish_precompute(e, shutdown_error(), 0.0);
-        return;
+void Service::Impl::submit_solve(const std::shared_ptr<Entry>& e, std::shared_ptr<const engine::Solver> solver,
+                                 DeformationRequest request, DeformCallback done) {
+  solve_pool.submit([this, e, solver = std::move(solver), request = std::move(request),
+                     done = std::move(done)]() mutable {
+    if (stopping.load()) {
+      done(shutdown_error());
+      return;
+    }
+    const auto start = Clock::now();
+    auto stored = std::make_shared<StoredResult>();
+    // Each model's answer passed its engine's check (equilibrium and every constraint).
+    Result<Eigen::VectorXd> displacement = capture([&]() -> Result<Eigen::VectorXd> {
+      if (request.model == DeformationModel::kNonlinear) {
+        std::shared_ptr<const engine::NonlinearSolver> nonlinear;
+        {
+          std::lock_guard lock(e->mu);
+          nonlinear = e->nonlinear;
+        }
+        auto answer = nonlinear->solve(request);  // from rest: a request is solved alone
+        if (!answer) return answer.error();
+        stored->nonlinear = answer->stats;
+        return std::move(answer->displacement);
       }
-      const auto& g = *e->geometry;
-      options.logger.info("precomputing geometry " + e->id.hex() + " (" + std::to_string(g.mesh.num_vertices()) +
-                          " control points, " + std::to_string(g.mesh.num_faces()) + " faces)");
-      engine::PrecomputeOptions opts = options.precompute;
-      opts.threads = options.precompute_threads;
-      opts.progress = [e](double f) { e->progress.store(std::clamp(f, 0.0, 1.0), std::memory_order_relaxed); };
-      opts.cancel = &stopping;
-      precomputing_now.fetch_add(1);
-      const auto start = Clock::now();
-      auto model = capture([&] { return engine::ShellModel::build(g.mesh, g.material, opts); });
-      const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-      precomputing_now.fetch_sub(1);
-      if (model && !*model) model = Error{ErrorCode::kInternal, "the precomputation returned no model"};
-      finish_precompute(e, std::move(model), seconds);
+      auto answer = solver->solve(request);
+      if (!answer) return answer.error();
+      stored->stats = answer->stats;
+      return std::move(answer->displacement);
     });
-  }
-
-  void finish_precompute(const std::shared_ptr<Entry>& e, Result<std::shared_ptr<const engine::ShellModel>> model,
-                         double seconds) {
-    std::vector<Pending> pending;
-    std::shared_ptr<const engine::Solver> solver;
-    std::string error;
-    {
-      std::lock_guard lock(e->mu);
-      if (model) {
-        e->model = std::move(*model);
-        solver = std::make_shared<const engine::Solver>(e->model, cache);
-        e->solver = solver;
-        precompute_hist.observe(seconds);  // before the status is visible: stats never lag it
-        e->status = GeometryStatus::kReady;
-        const size_t actual = mesh_bytes(e->geometry->mesh) + e->model->memory_bytes();
-        budget.resize(e->reserved_bytes, actual);
-        e->reserved_bytes = actual;
-      } else {
-        e->status = GeometryStatus::kFailed;
-        e->error = model.error().message;
-        const size_t kept = mesh_bytes(e->geometry->mesh);
-        budget.resize(e->reserved_bytes, kept);
-        e->reserved_bytes = kept;
-        error = "the precomputation of geometry " + e->id.hex() + " failed: " + e->error;
-      }
-      pending.swap(e->pending);
+    if (!displacement) {
+      solves_failed.fetch_add(1);
+      Error err = displacement.error();
+      if (err.code == ErrorCode::kCancelled) err.code = ErrorCode::kUnavailable;
+      if (err.code == ErrorCode::kInternal) options.logger.error("solve failed: " + err.message);
+      done(std::move(err));
+      return;
     }
-    e->cv.notify_all();
-    if (solver) {
-      options.logger.info("geometry " + e->id.hex() + " is ready (precomputed in " + std::to_string(seconds) + " s)");
-      for (auto& [request, done] : pending) submit_solve(e, solver, std::move(request), std::move(done));
-    } else {
-      const bool shutdown = model.error().code == ErrorCode::kUnavailable || model.error().code == ErrorCode::kCancelled;
-      if (!shutdown) options.logger.warning(error);
-      for (auto& [request, done] : pending) {
-        done(shutdown ? shutdown_error() : Error{ErrorCode::kUnprocessable, error});
-      }
-    }
-  }
-
-  void submit_solve(const std::shared_ptr<Entry>& e, std::shared_ptr<const engine::Solver> solver,
-                    DeformationRequest request, DeformCallback done) {
-    solve_pool.submit([this, e, solver = std::move(solver), request = std::move(request),
-                       done = std::move(done)]() mutable {
-      if (stopping.load()) {
-        done(shutdown_error());
-        return;
-      }
-      const auto start = Clock::now();
-      auto solution = capture([&] { return solver->solve(request); });
-      if (!solution) {
+    const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    stored->positions = engine::Solution{*displacement, {}}.positions(e->geometry->mesh);
+    for (const Vec3& p : stored->positions) {
+      if (!p.allFinite()) {
         solves_failed.fetch_add(1);
-        Error err = solution.error();
-        if (err.code == ErrorCode::kCancelled) err.code = ErrorCode::kUnavailable;
-        if (err.code == ErrorCode::kInternal) options.logger.error("solve failed: " + err.message);
-        done(std::move(err));
+        done(Error{ErrorCode::kUnprocessable,
+                   "the solve produced non-finite positions: the forces and constraints do not determine the "
+                   "deformation"});
         return;
       }
-      const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-      auto stored = std::make_shared<StoredResult>();
-      stored->positions = solution->positions(e->geometry->mesh);
-      for (const Vec3& p : stored->positions) {
-        if (!p.allFinite()) {
-          solves_failed.fetch_add(1);
-          done(Error{ErrorCode::kUnprocessable,
-                     "the solve produced non-finite positions: the forces and constraints do not determine the "
-                     "deformation"});
-          return;
-        }
-      }
-      stored->stats = solution->stats;
-      stored->request = std::move(request);
-      const size_t bytes = sizeof(StoredResult) + stored->positions.size() * sizeof(Vec3) + request_bytes(stored->request);
-      bool fits = false;
-      {
-        // The id is assigned here, under the geometry's lock, at the moment the result is
-        // stored: ids follow the storage order and none is skipped or reused.
-        std::lock_guard lock(e->mu);
-        fits = budget.try_reserve(bytes);
-        if (fits) {
-          stored->res_id = static_cast<uint32_t>(e->results.size() + 1);
-          stored->stored_at = std::chrono::system_clock::now();
-          // Counters first, so that whoever sees the result also sees them.
-          total_results.fetch_add(1);
-          solves_ok.fetch_add(1);
-          solve_hist.observe(seconds);
-          e->results.push_back(stored);
-        }
-      }
-      if (!fits) {
-        refused_no_memory.fetch_add(1);
-        done(Error{ErrorCode::kResourceExhausted,
-                   "the server's memory budget (" + megabytes(budget.budget()) + ", " + megabytes(budget.used()) +
-                       " in use) cannot store another result of " + megabytes(bytes) +
-                       "; results are never dropped to make room (restart the server with a larger --store-mb)"});
-        return;
-      }
-      e->cv.notify_all();
-      done(ResultPtr(std::move(stored)));
+    }
+    stored->request = std::move(request);
+    auto kept = store(*e, std::move(stored), [&] {
+      solves_ok.fetch_add(1);
+      solve_hist.observe(seconds);
     });
-  }
-
-  ServiceOptions options;
-  std::shared_ptr<engine::FactorCache> cache;
-  MemoryBudget budget;
-
-  mutable std::shared_mutex registry_mu;
-  std::unordered_map<GeomId, std::shared_ptr<Entry>, GeomIdHash> by_id;
-  std::vector<std::shared_ptr<Entry>> in_order;
-
-  std::atomic<bool> stopping{false};
-  std::mutex shutdown_mu;
-  std::atomic<int> precomputing_now{0};
-  mutable std::atomic<size_t> waiters{0};
-  std::atomic<uint64_t> total_results{0}, solves_ok{0}, solves_failed{0}, refused_no_memory{0};
-  Histogram solve_hist, precompute_hist;
-
-  // Declared last: destroyed (joined) first, while everything their tasks use still exists.
-  internal::TaskPool precompute_pool;
-  internal::TaskPool solve_pool;
-};
+    done(std::move(kept));
+  });
+}
 
 Service::Service(ServiceOptions options) : options_(std::move(options)), impl_(std::make_unique<Impl>(options_)) {}
 
@@ -371,6 +353,7 @@ void Service::shutdown() {
   std::lock_guard once(impl_->shutdown_mu);
   impl_->stopping.store(true);
   // Answer every request that waits for a precomputation and wake every waiter.
+  impl_->leases.stop();
   for (const auto& e : impl_->all()) {
     std::vector<Pending> pending;
     {
@@ -379,6 +362,7 @@ void Service::shutdown() {
     }
     e->cv.notify_all();
     for (auto& p : pending) p.second(shutdown_error());
+    impl_->fail_hold_waiters(*e, shutdown_error(), /*drop_changes=*/false);
   }
   impl_->precompute_pool.shutdown();
   impl_->solve_pool.shutdown();
@@ -463,19 +447,8 @@ void Service::deform(const GeomId& id, DeformationRequest request, DeformCallbac
   if (impl_->stopping.load()) return done(shutdown_error());
   auto e = impl_->find(id);
   if (!e) return done(not_found(id));
-  {
-    // The one validation of a request; surface points are checked against the limit surface now,
-    // not after the precomputation.
-    RequestContext context{e->geometry->mesh.num_vertices(), nullptr};
-    std::optional<LimitEvaluator> evaluator;
-    if (!request.limit_constraints.empty() || !request.surface_forces.empty()) {
-      auto made = impl_->evaluator(*e);
-      if (!made) return done(made.error());
-      evaluator = std::move(*made);
-      context.evaluator = &*evaluator;
-    }
-    if (auto ok = validate_request(request, context); !ok) return done(ok.error());
-  }
+
+  if (auto ok = impl_->validate(*e, request); !ok) return done(ok.error());
 
   std::unique_lock lock(e->mu);
   if (impl_->stopping.load()) {
@@ -526,6 +499,41 @@ Result<ResultPtr> Service::result(const GeomId& id, uint32_t res_id) const {
   return e->results[res_id - 1];
 }
 
+namespace {
+
+// The stresses of a result of the nonlinear model: the Cauchy (true) resultants of the deformed
+// surface from its Green-Lagrange strains, in the layout of the linear ones (a linear evaluation
+// of a large displacement would show the strains of the rotation).
+StressSample from_nonlinear(const engine::ShellModel& model, const engine::NonlinearStressSample& n) {
+  StressSample s;
+  s.point = n.point;
+  s.position = model.evaluator().evaluate(n.point).position;  // rest position, as the linear samples
+  s.membrane_force = n.cauchy_membrane_force;
+  s.bending_moment = n.cauchy_bending_moment;
+  s.von_mises_top = n.von_mises_top;
+  s.von_mises_bottom = n.von_mises_bottom;
+  return s;
+}
+
+Result<StressField> nonlinear_stresses(const engine::ShellModel& model, const Eigen::VectorXd& u,
+                                       const StressQuery& query, StressField field) {
+  const engine::NonlinearStressSummary summary = engine::nonlinear_max_stress(model, u, field.yield_strength);
+  field.max = from_nonlinear(model, summary.max);
+  field.exceeds_yield = field.yield_strength > 0.0 && summary.exceeds_yield;
+  std::vector<SurfacePoint> points;
+  if (query.level > 0) {
+    points = Tessellation::create(model.evaluator(), query.level).value().vertex_points();
+  } else {
+    if (auto ok = validate_points(query.points, model.evaluator()); !ok) return ok.error();
+    points = query.points;
+  }
+  field.samples.reserve(points.size());
+  for (const SurfacePoint& p : points) field.samples.push_back(from_nonlinear(model, engine::evaluate_nonlinear_stress(model, u, p)));
+  return field;
+}
+
+}  // namespace
+
 Result<StressField> Service::stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) const {
   if (query.level != 0 && (query.level < 1 || query.level > StressQuery::kMaxLevel)) {
     return Error{ErrorCode::kInvalidArgument, "stresses: level " + std::to_string(query.level) +
@@ -557,6 +565,7 @@ Result<StressField> Service::stresses(const GeomId& id, uint32_t res_id, const S
     StressField field;
     field.res_id = res_id;
     field.yield_strength = query.yield_strength;
+    if ((*stored)->nonlinear) return nonlinear_stresses(*model, u, query, std::move(field));
     const engine::StressSummary summary = engine::max_stress(*model, u, field.yield_strength);
     field.max = summary.max;
     field.exceeds_yield = field.yield_strength > 0.0 && summary.exceeds_yield;
@@ -610,6 +619,12 @@ Result<LimitComb> Service::limit_comb(const GeomId& id, const SurfacePoint& poin
   });
 }
 
+Result<LimitEvaluator> Service::limit_evaluator(const GeomId& id) const {
+  auto e = impl_->find(id);
+  if (!e) return not_found(id);
+  return impl_->evaluator(*e);
+}
+
 ServiceStats Service::stats() const {
   ServiceStats s;
   for (const auto& e : impl_->all()) {
@@ -621,6 +636,9 @@ ServiceStats Service::stats() const {
       case GeometryStatus::kFailed: ++s.geometries_failed; break;
     }
     s.pending_solves += e->pending.size();
+    s.holds += e->holds.live.size();
+    s.hold_changes_pending += e->holds.pending.size();
+    if (e->holds.unsolvable) ++s.hold_states_unsolvable;
   }
   s.results = impl_->total_results.load();
   s.precomputations_running = impl_->precomputing_now.load();
@@ -633,6 +651,15 @@ ServiceStats Service::stats() const {
   s.refused_no_memory = impl_->refused_no_memory.load();
   s.solve_seconds = impl_->solve_hist.snapshot();
   s.precompute_seconds = impl_->precompute_hist.snapshot();
+  s.hold_solves = impl_->hold_solves.load();
+  s.hold_changes_solved = impl_->hold_changes_solved.load();
+  s.hold_changes_superseded = impl_->hold_changes_superseded.load();
+  s.hold_renewals = impl_->hold_renewals.load();
+  s.hold_conflicts = impl_->hold_conflicts.load();
+  s.hold_rejections = impl_->hold_rejections.load();
+  s.leases_expired = impl_->leases_expired.load();
+  s.followers = impl_->followers.load();
+  s.hold_solve_seconds = impl_->hold_solve_hist.snapshot();
   return s;
 }
 

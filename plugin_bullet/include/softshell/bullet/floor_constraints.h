@@ -31,7 +31,8 @@ struct FloorSettings {
   Vec3 point = Vec3::Zero();        ///< a point of the floor plane, world frame (length unit)
   Vec3 normal = Vec3::UnitY();      ///< floor normal, world frame, pointing up out of the floor (any length > 0)
   /// Surface samples at most this far above the plane (or below it) touch it (length unit);
-  /// < 0 means 1e-3 of the shell's size (bounding diagonal of its control points).
+  /// < 0 means 1e-3 of the shell's size (bounding diagonal of its rest control points). The
+  /// rule is the SDK's `floor_touching_samples`, the same for both holds.
   double tolerance = -1.0;
   /// Axes (bits 1 = x, 2 = y, 4 = z of the shell's local frame) held at every touching point.
   /// All three (the default) is a contact that sticks; holding only the axis along the normal
@@ -44,8 +45,8 @@ struct FloorSettings {
 /// The vertex constraints that hold a shell on the floor.
 ///
 /// The limit surface is sampled at the tessellation's vertices (the shape it shows now, in the
-/// shell's local frame, placed in the world by `shell_to_world`). At every sample within the
-/// tolerance of the plane, the control point with the largest limit weight there (the one that
+/// shell's local frame, placed in the world by `shell_to_world`); the samples that touch are the
+/// SDK's `floor_touching_samples` (interaction.h). At every touching sample, the control point with the largest limit weight there (the one that
 /// dominates the surface at that point: the vertex itself at a control vertex's limit point) is
 /// held with zero displacement on `mask`'s axes. Each control point appears once, in ascending
 /// order. Vertex constraints keep the request in the binary layout and the set of fixed degrees

@@ -12,6 +12,8 @@
 #include <optional>
 #include <string_view>
 #include <thread>
+
+#include "softshell/executor.h"
 #include <vector>
 
 #include <LinearMath/btTransform.h>
@@ -69,8 +71,8 @@ struct ShellSettings {
   /// Bullet broadphase filter group and mask of the shell's collision object.
   int collision_group = 2;    ///< btBroadphaseProxy::StaticFilter
   int collision_mask = ~2;    ///< everything but other static objects
-  /// Move the collision mesh to a new result on the bridge's worker thread (limit evaluation and
-  /// BVH refit into the hidden half of the double-buffered `CollisionMesh`), so the physics thread
+  /// Move the collision mesh to a new result in a task on the bridge's executor (limit evaluation
+  /// and BVH refit into the hidden half of the double-buffered `CollisionMesh`), so the physics thread
   /// only swaps shapes: a result then shows one or more steps after it arrived. False does the
   /// whole update inside `update()`.
   bool background_mesh_update = true;
@@ -125,16 +127,19 @@ struct UpdateReport {
 /// makes no contacts between a static shell and kinematic or static objects.
 ///
 /// With `background_mesh_update` (the default) the new limit surface is evaluated and the BVH
-/// refitted on one worker thread owned by the bridge, into the hidden half of the shell's
-/// double-buffered collision mesh; `update()` then only swaps the collision object's shape.
+/// refitted in a task on the host's `Executor` (one task at a time per bridge, so the work stays
+/// in order), into the hidden half of the shell's double-buffered collision mesh; `update()` then
+/// only swaps the collision object's shape.
 ///
-/// Ownership: the world is not owned and must outlive the bridge (the destructor stops the worker
-/// and removes the shells' collision objects from it). Sessions are shared. Thread-safety: call
-/// every member from the thread that steps the world, between `stepSimulation` calls (the worker
-/// never touches what Bullet or that thread use).
+/// Ownership: the world is not owned and must outlive the bridge (the destructor waits for the
+/// bridge's running task and removes the shells' collision objects from the world). Sessions and
+/// the executor are shared. Thread-safety: call every member from the thread that steps the
+/// world, between `stepSimulation` calls (the task never touches what Bullet or that thread use).
 class ShellBridge {
  public:
-  explicit ShellBridge(btDiscreteDynamicsWorld& world);
+  /// `executor`: where the background mesh updates run (default: the process-wide pool). An
+  /// `InlineExecutor` runs them inside `update()`, like `background_mesh_update = false`.
+  explicit ShellBridge(btDiscreteDynamicsWorld& world, std::shared_ptr<Executor> executor = default_executor());
   ~ShellBridge();
   ShellBridge(const ShellBridge&) = delete;
   ShellBridge& operator=(const ShellBridge&) = delete;
@@ -194,17 +199,21 @@ class ShellBridge {
   void commit_prepared(Shell& shell, UpdateReport& report);
   void show(Shell& shell, uint32_t res_id, UpdateReport& report);
   bool busy(const Shell& shell) const;
+  bool runnable_locked() const;
+  void start_work();
   void work();
 
   btDiscreteDynamicsWorld& world_;
   std::vector<std::unique_ptr<Shell>> slots_;
   std::vector<uint32_t> generations_;
   std::vector<double> max_mass_;  // scratch of update()
-  // The worker that prepares collision meshes; mutex_ guards slots_ changes and the job states.
+  // The task that prepares collision meshes (at most one runs: working_); mutex_ guards slots_
+  // changes and the job states, done_ signals a finished job or the task's end.
+  std::shared_ptr<Executor> executor_;
   mutable std::mutex mutex_;
-  std::condition_variable wake_, done_;
+  std::condition_variable done_;
   bool stopping_ = false;
-  std::thread worker_;
+  bool working_ = false;
 };
 
 }  // namespace softshell::bullet

@@ -5,7 +5,7 @@
  *  - Objects are opaque handles made by a `ss_<noun>_create...` function and released by the
  *    matching `ss_<noun>_destroy`, which accepts NULL. A handle owns what it needs: e.g. a picker
  *    keeps its tessellation alive, so handles may be destroyed in any order.
- *  - Every other function returns an `ss_status` (int32): SS_OK (0) or an error code. Codes 1..11
+ *  - Every other function returns an `ss_status` (int32): SS_OK (0) or an error code. Codes 1..12
  *    are softshell's `ErrorCode` values (result.h); 100 and 101 exist only here. After a failure
  *    `ss_last_error_message()` says what was wrong, for a person; it is thread-local.
  *  - No exception, C++ type or allocation ownership crosses the boundary. Strings are UTF-8,
@@ -36,8 +36,7 @@
  * (`ss_session_geometry_status`, `ss_session_limit_comb`, upload) answer at once in-process and
  * take one round trip on a remote session.
  *
- * Not yet in the C ABI: stresses (the C++ `Session::stresses`, softshell/stresses.h; planned here
- * as `ss_session_stresses`) and a host task callback for the server's threads.
+ * Not yet in the C ABI: a host task callback for the server's threads (the C++ `Executor`).
  */
 #ifndef SOFTSHELL_C_H
 #define SOFTSHELL_C_H
@@ -93,6 +92,7 @@ typedef int32_t ss_status;
 #define SS_CANCELLED 9
 #define SS_IO_ERROR 10             /* a file could not be read or written */
 #define SS_INTERNAL 11             /* a bug in softshell; please report it */
+#define SS_CONFLICT 12             /* contradicts other clients' holds (HTTP 409) */
 #define SS_BUFFER_TOO_SMALL 100    /* C ABI only: `capacity` is below `*out_count` */
 #define SS_NOT_READY 101           /* C ABI only: an asynchronous operation has not finished */
 
@@ -254,6 +254,7 @@ typedef struct ss_grab ss_grab;                   /* a grab following a hand */
 typedef struct ss_refinement ss_refinement;       /* a mesh refined k levels (level of detail) */
 typedef struct ss_session ss_session;             /* connection to a server */
 typedef struct ss_deformation ss_deformation;     /* an asynchronous deformation */
+typedef struct ss_stress_field ss_stress_field;   /* stresses of a stored result */
 
 /* ---------------------------------------------------------------------------------------------
  * Control mesh */
@@ -475,6 +476,39 @@ SS_API ss_status ss_session_geometry_status(ss_session* session, const ss_geom_i
 SS_API ss_status ss_session_limit_comb(ss_session* session, const ss_geom_id* id, const ss_surface_point* point,
                                        int32_t* out_indices, double* out_position, double* out_du, double* out_dv,
                                        int32_t capacity, int32_t* out_count);
+
+/* ---------------------------------------------------------------------------------------------
+ * Stresses of a stored result (softshell/stresses.h; HTTP `.../results/{res_id}/stresses`) */
+
+/** The stress state at one surface point, in a local Cartesian frame: e1 along the limit
+ *  surface's u tangent, e2 in the tangent plane, e3 the unit normal. */
+typedef struct ss_stress_sample {
+  ss_surface_point point;
+  ss_vec3 position;         /* rest limit position */
+  ss_vec3 membrane_force;   /* n11, n22, n12 (N/m) */
+  ss_vec3 bending_moment;   /* m11, m22, m12 (N m / m) */
+  double von_mises_top;     /* Pa, at +t/2 along the normal */
+  double von_mises_bottom;  /* Pa, at -t/2 */
+} ss_stress_sample;
+
+/** Computes the stresses of result `res_id` of geometry `id` (one call to the server) at the
+ *  vertices of the level-`level` tessellation (1..4, in the order of `ss_tessellation_vertices` of
+ *  a level-`level` tessellation of the same mesh: what a renderer of that level draws), or, with
+ *  `level` 0, at `points` (`num_points` of them, 1..1,000,000). `yield_strength` (Pa, >= 0; 0 =
+ *  unknown) flags where the material yields: the linear elastic model stops holding there (a
+ *  preset's yield strength: `ss_material_preset_at`). SS_NOT_FOUND for an unknown
+ *  geometry or result. Read the field with the two functions below; destroy it when done. */
+SS_API ss_status ss_session_stresses(ss_session* session, const ss_geom_id* id, uint32_t res_id, int32_t level,
+                                     const ss_surface_point* points, int32_t num_points, double yield_strength,
+                                     ss_stress_field** out_field);
+/** The samples, one per queried point, in order (the buffer convention above). */
+SS_API ss_status ss_stress_field_samples(const ss_stress_field* field, ss_stress_sample* out_samples,
+                                         int32_t capacity, int32_t* out_count);
+/** The largest von Mises stress over the whole surface (its quadrature points), where it is, and
+ *  `*out_exceeds_yield` (nullable) = 1 if it exceeds the query's yield strength. */
+SS_API ss_status ss_stress_field_max(const ss_stress_field* field, ss_stress_sample* out_max,
+                                     int32_t* out_exceeds_yield);
+SS_API void ss_stress_field_destroy(ss_stress_field* field);
 
 #ifdef __cplusplus
 }  /* extern "C" */

@@ -54,6 +54,12 @@ struct LimitConstraint {
   std::optional<Vec3> dv_displacement;  ///< change of the v tangent, if prescribed
 };
 
+/// The mechanical model a request is solved with (PROTOCOL.md version 2, "The nonlinear model").
+enum class DeformationModel : uint8_t {
+  kLinear,     ///< the linear Kirchhoff-Love shell (small displacements; the paper's model)
+  kNonlinear,  ///< the geometrically nonlinear shell (large displacements and rotations)
+};
+
 /// Everything a deformation request can carry. Forces and loads are in N (SI), areas in the
 /// mesh's length unit squared.
 struct DeformationRequest {
@@ -65,13 +71,19 @@ struct DeformationRequest {
   std::vector<SurfaceForce> surface_forces;
   Vec3 surface_load = Vec3::Zero();  ///< force per unit area of the limit surface, f_A = ∫ N_A q dA
   double pressure = 0.0;             ///< force per unit area along the unit normal (counter-clockwise side)
+  /// JSON field `model` (or the query parameter `model=` with either layout; the binary body
+  /// cannot carry it). With kNonlinear, `pressure` follows the deformed normal.
+  DeformationModel model = DeformationModel::kLinear;
 
-  /// True if only the fields of the binary layout are used.
+  /// True if only the fields of the binary layout are used (a nonlinear request does not fit:
+  /// the binary body alone would be solved with the linear model).
   bool fits_binary_layout() const {
-    return limit_constraints.empty() && surface_forces.empty() && surface_load.isZero(0.0) && pressure == 0.0;
+    return limit_constraints.empty() && surface_forces.empty() && surface_load.isZero(0.0) && pressure == 0.0 &&
+           model == DeformationModel::kLinear;
   }
   bool empty() const {
-    return vertex_constraints.empty() && lagrange_constraints.empty() && forces.empty() && fits_binary_layout();
+    return vertex_constraints.empty() && lagrange_constraints.empty() && forces.empty() && limit_constraints.empty() &&
+           surface_forces.empty() && surface_load.isZero(0.0) && pressure == 0.0;
   }
 };
 
@@ -79,6 +91,11 @@ struct DeformationRequest {
 struct DeformationResult {
   uint32_t res_id = 0;            ///< 1, 2, 3, ... per geometry, in the order stored
   std::vector<Vec3> positions;    ///< deformed control point positions (#V)
+  /// The model it was solved with; for kNonlinear the JSON layout adds `iterations` and
+  /// `residual` (the binary layout carries neither).
+  DeformationModel model = DeformationModel::kLinear;
+  int32_t iterations = 0;  ///< Newton iterations (nonlinear model)
+  double residual = 0.0;   ///< relative out-of-balance force at the answer (nonlinear model)
 };
 
 }  // namespace softshell

@@ -1,7 +1,7 @@
 #pragma once
 /// \file
 /// \brief `LimitEvaluator`: exact evaluation of the Catmull-Clark limit surface and of its basis
-/// functions (limit stencils) with OpenSubdiv Bfr.
+/// functions (limit stencils), at every point including extraordinary vertices.
 
 #include <array>
 #include <cstdint>
@@ -51,27 +51,44 @@ struct LimitSample {
 /// Evaluates the Catmull-Clark limit surface of a control mesh (PROTOCOL.md scheme: Catmull-Clark,
 /// boundary interpolation from the mesh's `BoundaryMode`, creases and corners from its tags).
 ///
-/// Built once per mesh topology; evaluation is then cheap. Regular faces are exact bicubic
-/// B-spline patches. Faces next to an extraordinary vertex are approximated by OpenSubdiv Bfr's
-/// patch tree refined `approx_level_smooth` levels toward it (Options below).
+/// Built once per mesh topology; evaluation is then cheap. The evaluation is exact everywhere:
+/// regular faces are bicubic B-spline patches (OpenSubdiv Bfr); every other face (at an
+/// extraordinary vertex, an n-gon, a quad next to a non-quad) is split by OpenSubdiv's
+/// refinement into bicubic pieces and, at each extraordinary vertex, into rings of bicubic
+/// pieces that shrink toward it, evaluated with the powers of the local subdivision matrix
+/// (Stam's exact evaluation). Derivative weights are the exact derivatives of the position
+/// weights at every (u, v), arbitrarily close to an extraordinary vertex. (Faces at a
+/// non-manifold vertex or at an inner vertex of only two faces, where the scheme has no tangent
+/// plane modes of its own, are Bfr's approximation instead.)
+///
+/// At an extraordinary vertex itself (the corner of a face or sub-face where it sits) the
+/// derivatives with respect to the face's (u, v) vanish (valence 3) or diverge (valence 5 and
+/// more). There the stencil gives the exact limit position (the same as OpenSubdiv's limit
+/// mask), for du and dv two vectors that span the exact tangent plane with du x dv along the
+/// surface normal (inside the mesh: OpenSubdiv's limit tangent masks rotated onto the face's two
+/// edges at that corner; on the boundary: the two dominant left eigenvectors of the local
+/// subdivision matrix), and zero second derivatives. The normal is exact there; the lengths of
+/// du and dv, and curvatures, are not derivatives. The same holds closer than 2^-1000 to such a
+/// vertex.
 ///
 /// Copies are cheap and share the same immutable evaluator.
 /// Thread-safety: all const member functions may be called concurrently.
 class LimitEvaluator {
  public:
   struct Options {
-    /// Bfr refinement levels around extraordinary vertices of smooth faces (OpenSubdiv's default
-    /// is 2; softshell uses 3, which brings the shell's compliance within ~2e-5 of the exact limit
-    /// surface's, see README "Quadrature"). Clients and server must use the same value so that a
-    /// (face, u, v) names the same point on both. Range 1..10.
+    /// Bfr refinement levels around extraordinary vertices, with `sharp_features` on a tagged
+    /// mesh only (the smooth surface is evaluated exactly and ignores this). Range 1..10.
     int approx_level_smooth = 3;
-    /// Bfr refinement levels around sharp features (OpenSubdiv default 6). Range 1..10.
+    /// Bfr refinement levels around sharp features, with `sharp_features` only (OpenSubdiv
+    /// default 6). Range 1..10.
     int approx_level_sharp = 6;
     /// Let the mesh's crease and corner tags shape the surface. Off by default: the simulation
     /// uses the smooth limit surface (a sharp kink would act as a hinge in a Kirchhoff-Love shell),
     /// and a client must evaluate, render and pick on the same surface the server simulates, or
     /// a (face, u, v) would name different points. Turn it on only to display tagged meshes
-    /// that are not simulated.
+    /// that are not simulated. On a tagged mesh the surface is then OpenSubdiv Bfr's, which
+    /// approximates it next to extraordinary vertices and semi-sharp features (Gregory patches
+    /// `approx_level_*` levels deep); the `ev_corner_*` functions answer false.
     bool sharp_features = false;
   };
 
@@ -117,6 +134,27 @@ class LimitEvaluator {
   /// Throws `Exception(kInvalidArgument)` for a bad face, sub-face or (u, v).
   void face_stencils(int32_t face, int32_t subface, const std::vector<std::array<double, 2>>& uvs,
                      std::vector<int32_t>& out_indices, Eigen::MatrixXd& out_weights) const;
+
+  /// Quadrature at an extraordinary vertex (EV). A square cell of side `cell_size` at corner
+  /// `corner` (0 = (0,0), 1 = (1,0), 2 = (1,1), 3 = (0,1)) of a (sub-)face's domain where an EV
+  /// sits holds infinitely many polynomial rings shrinking toward it, on which a Gauss rule is not
+  /// exact. Fills `weight_factors` (gauss_points^2 values; value i + gauss_points j belongs to the
+  /// point (u0 + h x_i, v0 + h x_j) of the cell, x the Gauss-Legendre points on [0, 1]) with factors
+  /// for the weights of the gauss_points x gauss_points Gauss-Legendre rule on the cell that make
+  /// it exact for the leading terms of the surface's expansion at the vertex: the Jacobians of
+  /// every pair of the dominant eigenmodes of the local subdivision matrix, which are the leading
+  /// parts of the area element and of the surface gradient of every basis function there.
+  /// Returns false (and leaves `weight_factors` alone) if that corner is not an EV of an exactly
+  /// evaluated face, or if the cell is larger than the region where the expansion holds.
+  bool ev_corner_weights(int32_t face, int32_t subface, int corner, double cell_size, int gauss_points,
+                         std::vector<double>& weight_factors) const;
+
+  /// For the same cells as ev_corner_weights: the exact integral over the cell of
+  /// N_A (x_u x x_v) du dv for the control positions given (#V), column k for control point
+  /// support(face)[k] (the load of a unit pressure, which near the vertex no point rule integrates
+  /// exactly). False as for ev_corner_weights.
+  bool ev_corner_normal_weights(int32_t face, int32_t subface, int corner, double cell_size,
+                                const std::vector<Vec3>& positions, Eigen::Matrix3Xd& out) const;
 
   /// Control point indices of face `f`'s stencil (the same for every point of the face).
   std::vector<int32_t> support(int32_t face) const;

@@ -18,6 +18,10 @@ struct ObjReadOptions {
   int64_t max_vertices = 50'000'000;      ///< more `v` lines than this is an error
   int64_t max_face_indices = 200'000'000;  ///< more face corners than this is an error
   int32_t max_face_size = 1024;            ///< a face with more corners than this is an error
+  /// Also check the mesh for simulation (`find_mesh_issues`) and report the first problem in the
+  /// file's terms: the line of the face or vertex concerned and OBJ's 1-based vertex numbers
+  /// (kInvalidArgument or kUnprocessable, as `validate_mesh`).
+  bool validate = false;
 };
 
 /// Parses OBJ text into a control mesh.
@@ -32,7 +36,7 @@ struct ObjReadOptions {
 Result<ControlMesh> parse_obj(std::string_view text, std::string_view source_name = "<memory>",
                               const ObjReadOptions& options = {});
 
-/// Reads and parses an OBJ file (kIoError if it cannot be read).
+/// Reads and parses an OBJ file (kIoError if it cannot be read, e.g. it is a directory).
 Result<ControlMesh> read_obj(const std::filesystem::path& path, const ObjReadOptions& options = {});
 
 /// OBJ text of a control mesh: `v` lines with 17 significant digits (round-trips exactly), `f`

@@ -38,6 +38,7 @@ enum class ErrorCode : int32_t {
   kCancelled = 9,             ///< the operation was cancelled by its owner
   kIoError = 10,              ///< a file could not be read or written
   kInternal = 11,             ///< a bug in softshell; please report it
+  kConflict = 12,             ///< contradicts the state others made: a hold against other holds (HTTP 409)
 };
 
 /// Short stable name of a code, e.g. "invalid_argument" (the `error` field of HTTP errors).

@@ -145,6 +145,17 @@ struct FloorContact {
   void add_to(DeformationRequest& request) const;
 };
 
+/// Which samples of the shape `tessellation` shows touch `floor`: the indices (ascending) of the
+/// tessellation's vertices at most `tolerance` above the plane, or below it. `tolerance` < 0 means
+/// 1e-3 of the object's size (the bounding diagonal of its rest control points). The one rule of
+/// every floor in softshell (`floor_contact` here, the Bullet bridge's floor constraints).
+/// kInvalidArgument for a non-finite plane or tolerance or a zero normal.
+Result<std::vector<int32_t>> floor_touching_samples(const Tessellation& tessellation, const Plane& floor,
+                                                    double tolerance);
+
+/// The coordinate axis (0, 1, 2) a normal lies along (either sign, to 1e-9 of its length), or -1.
+int coordinate_axis(const Vec3& normal);
+
 /// The floor constraints for the shape `tessellation` currently shows (after `update`, the
 /// deformed one). kInvalidArgument for a non-finite plane or tolerance, a zero normal, or kNormal
 /// with a normal that is not a coordinate axis. No sample touching is not an error (empty result).

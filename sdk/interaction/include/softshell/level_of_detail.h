@@ -85,10 +85,10 @@ class MeshRefinement {
   /// kInvalidArgument on a wrong count.
   Result<std::vector<Vec3>> refine_positions(const std::vector<Vec3>& coarse_positions) const;
 
-  /// Evaluator options for the fine mesh such that Bfr approximates irregular faces over the same
-  /// regions on both levels (approximation levels lowered by `levels()`, at least 1): then both
-  /// limit surfaces agree to rounding. With the same options on both levels they agree exactly on
-  /// regular faces and to Bfr's approximation accuracy next to extraordinary vertices.
+  /// Evaluator options for the fine mesh. The smooth limit surface is evaluated exactly, so both
+  /// levels' surfaces agree to rounding with any options; with `sharp_features`, Bfr's
+  /// approximation next to sharp features is kept over the same regions on both levels
+  /// (approximation levels lowered by `levels()`, at least 1).
   LimitEvaluator::Options fine_evaluator_options(const LimitEvaluator::Options& coarse_options) const;
 
   /// The fine surface point (a quad face, sub-face 0) that is the same limit point as `coarse_point`.

@@ -26,6 +26,7 @@
 
 #include "softshell/control_mesh.h"
 #include "softshell/deformation.h"
+#include "softshell/hold.h"
 #include "softshell/limit_evaluator.h"
 #include "softshell/material.h"
 #include "softshell/result.h"
@@ -137,7 +138,8 @@ Result<DeformationRequest> decode_request_binary(std::string_view body);
 /// default zero), `lagrange_constraints` (`indices`, `coefficients`, `values`), `forces`
 /// (`index`, `force`) and the extensions `limit_constraints` (`face`, `subface` default 0, `u`,
 /// `v`, `displacement`, optional `du_displacement`, `dv_displacement`), `surface_forces`
-/// (`face`, `subface`, `u`, `v`, `force`), `surface_load` and `pressure`. Every field optional.
+/// (`face`, `subface`, `u`, `v`, `force`), `surface_load`, `pressure` and `model` ("linear",
+/// "nonlinear"). Every field optional.
 Result<DeformationRequest> decode_request_json(std::string_view body);
 
 // ---------------------------------------------------------------------------------------------
@@ -154,6 +156,13 @@ Result<DeformationResult> decode_result_binary(std::string_view body,
                                                std::optional<int32_t> expected_vertices = std::nullopt);
 Result<DeformationResult> decode_result_json(std::string_view body,
                                              std::optional<int32_t> expected_vertices = std::nullopt);
+
+/// The JSON result of a hold state: `{"res_id": k, "positions": [...], "holds": {"<hold_id>": v, ...}}`
+/// (PROTOCOL.md version 2; `holds` in the order given).
+std::string encode_result_json(const DeformationResult& result, const HoldVersions& holds);
+/// Decodes a JSON result with its optional `holds` map (absent for results of `POST .../results`).
+Result<HeldResult> decode_held_result_json(std::string_view body,
+                                           std::optional<int32_t> expected_vertices = std::nullopt);
 
 /// `{"res_ids": [1, 2, ...]}`.
 std::string encode_result_ids_json(const std::vector<uint32_t>& ids);
@@ -181,7 +190,33 @@ Result<GeometryInfo> decode_geometry_info_json(std::string_view body);
 std::string encode_geometry_list_json(const std::vector<GeometryInfo>& list);
 Result<std::vector<GeometryInfo>> decode_geometry_list_json(std::string_view body);
 
+// ---------------------------------------------------------------------------------------------
+// Holds (`PUT/DELETE/GET /geometries/{id}/holds/{hold_id}`, `GET /geometries/{id}/holds`)
+
+/// Checks a hold id: 1 to 64 characters of `[A-Za-z0-9._-]`; kInvalidArgument otherwise.
+Result<void> check_hold_id(std::string_view hold_id);
+
+/// "solved", "solving", "unsolvable".
+std::string_view to_string(HoldStateStatus state);
+Result<HoldStateStatus> parse_hold_state(std::string_view name);
+
+/// The answer of a PUT that does not wait for its result (202): `{"hold_id": "...", "version": v}`.
+std::string encode_hold_accepted_json(std::string_view hold_id, uint64_t version);
+Result<HoldInfo> decode_hold_accepted_json(std::string_view body);
+
+/// `{"holds": [{"hold_id", "version", "expires_in"}, ...], "res_id", "state", "message"}`.
+std::string encode_hold_list_json(const HoldList& list);
+Result<HoldList> decode_hold_list_json(std::string_view body);
+
+/// `{"hold_id", "version", "expires_in", "request": <JSON request layout>}`.
+std::string encode_hold_json(const HoldDetail& hold);
+Result<HoldDetail> decode_hold_json(std::string_view body);
+
 /// Parses a status name ("precomputing", "ready", "failed").
 Result<GeometryStatus> parse_geometry_status(std::string_view name);
+
+/// Parses a model name ("linear", "nonlinear"): the request's JSON field `model` and the query
+/// parameter `model=` of `POST .../results` and `PUT .../holds`.
+Result<DeformationModel> parse_deformation_model(std::string_view name);
 
 }  // namespace softshell::wire

@@ -14,7 +14,9 @@ namespace softshell::engine {
 
 using softshell::StressSample;
 
-/// Stresses at a point for a displacement vector (3n). Throws Exception(kInvalidArgument) for a
+/// Stresses at a point for a displacement vector (3n). At an extraordinary vertex itself, where
+/// the curvature of a Catmull-Clark surface vanishes or diverges, they are taken 2^-10 inside
+/// the face (in its (u, v)); the position is the vertex's. Throws Exception(kInvalidArgument) for a
 /// bad point or vector size.
 StressSample evaluate_stress(const ShellModel& model, const Eigen::VectorXd& displacement, const SurfacePoint& point);
 

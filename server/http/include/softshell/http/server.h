@@ -10,12 +10,17 @@
 /// write. Solves and precomputations run on the service's fixed pools, so long polls (which hold
 /// an I/O thread while they wait) can never starve a computation, and at most
 /// `max_connections - reserved_connections` connections may long-poll at once, so waiters cannot
-/// starve other requests of I/O threads either.
+/// starve other requests of I/O threads either. Event streams (`GET .../events`) hold no I/O
+/// thread: once their request is checked, the socket goes to an event writer thread (of
+/// `event_writers`), which serves its share of the streams over non-blocking sockets (each
+/// result serialized once for all of them, latest wins per stream),
+/// so they count against the file descriptor limit and the service's memory budget only.
 
 #include <chrono>
 #include <cstddef>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "softshell/result.h"
 #include "softshell/service/log.h"
@@ -44,9 +49,23 @@ struct ServerOptions {
   /// An I/O thread idle this long exits (at least 8 are kept), so a burst of clients leaves no
   /// crowd of idle threads behind.
   std::chrono::milliseconds idle_thread_exit{30000};
-  /// `latest_result`'s `wait` default and upper bound (PROTOCOL.md: 25 and 60 seconds).
+  /// `wait` default and upper bound of `latest_result` and of hold PUTs and DELETEs (PROTOCOL.md:
+  /// 25 and 60 seconds).
   double default_wait_seconds = 25.0;
   double max_wait_seconds = 60.0;
+  /// An event stream that had nothing to send for this long gets a `: keep-alive` comment
+  /// (PROTOCOL.md: at least every 15 s).
+  std::chrono::milliseconds event_keep_alive{10000};
+  /// An event stream whose client takes no bytes for this long is closed (its newest frame
+  /// waits meanwhile; nothing older is queued).
+  std::chrono::milliseconds event_stall_timeout{30000};
+  /// Threads that write event streams (each serves a share of the streams over epoll); 0 = half
+  /// the hardware threads, at least 1 (the other half is left to solves and requests).
+  int event_writers = 0;
+  /// Origins allowed to call the API from pages served elsewhere (CORS; "*" = any origin):
+  /// preflight requests are answered and responses carry Access-Control-Allow-Origin. Empty
+  /// (the default): no CORS headers, browsers allow only same-origin pages (the app at /).
+  std::vector<std::string> cors_origins;
   /// Where request lines (`info`: method, path, status, microseconds) and handler failures
   /// (`error`) go.
   service::Logger logger;
@@ -75,7 +94,8 @@ class HttpServer {
   /// bound port; kUnavailable if the address cannot be bound or the server already started.
   Result<int> start(const std::string& host, int port);
 
-  /// Stops accepting, answers waiting long polls and deformation requests with 503, lets
+  /// Stops accepting, answers waiting long polls, deformation requests and hold changes with 503,
+  /// ends every event stream after the event it is writing (the end of its chunked body), lets
   /// running requests finish and joins every thread. The service keeps running.
   void stop();
 
@@ -87,11 +107,12 @@ class HttpServer {
   std::string metrics_text() const;
   /// Counters per endpoint.
   std::vector<EndpointStats> endpoint_stats() const;
-  /// Connections (I/O threads) busy right now, I/O threads alive (busy or idle), and long polls
-  /// waiting right now.
+  /// Connections (I/O threads) busy right now, I/O threads alive (busy or idle), long polls
+  /// waiting right now, and event streams open.
   int busy_connections() const;
   int connection_threads() const;
   int waiting_long_polls() const;
+  int event_streams() const;
 
   const ServerOptions& options() const;
   service::Service& service() const;

@@ -2,12 +2,20 @@
 /// \file
 /// \brief `Service`: the shared simulation service of PROTOCOL.md, free of HTTP. Holds geometries
 /// by content id and namespace, precomputes them on a worker pool, solves deformations on another,
-/// keeps each geometry's ordered result history and wakes long-poll waiters.
+/// keeps each geometry's ordered result history, wakes long-poll waiters and notifies
+/// subscribers; and, for PROTOCOL.md version 2, keeps every geometry's *holds* (many clients'
+/// standing constraints and loads) and solves their combined hold state.
 ///
-/// Threads: a `Service` owns two fixed pools, one for precomputations and one for solves.
-/// Callers' threads (HTTP connection threads, an application's threads) only ever *wait*
-/// (for a solve, a precomputation or a newer result) on condition variables or futures; they
-/// never occupy a pool worker, so any number of waiting clients cannot delay a solve.
+/// Threads: a `Service` owns two fixed pools, one for precomputations and one for solves, and one
+/// thread that ends lapsed hold leases. Callers' threads (HTTP connection threads, an
+/// application's threads) only ever *wait* (for a solve, a precomputation or a newer result) on
+/// condition variables or futures; they never occupy a pool worker, so any number of waiting
+/// clients cannot delay a solve.
+///
+/// Holds: each geometry has one hold-state solver loop that runs on the solve pool with at most
+/// one solve in flight. Changes (PUT, DELETE, lapsed leases) that arrive while it solves are
+/// merged into its next solve, which takes the newest version of every live hold; its result is
+/// stored in the same history as `deform` results.
 
 #include <chrono>
 #include <cstddef>
@@ -15,6 +23,7 @@
 #include <functional>
 #include <future>
 #include <memory>
+#include <optional>
 #include <stop_token>
 #include <string>
 #include <vector>
@@ -22,8 +31,10 @@
 #include "softshell/control_mesh.h"
 #include "softshell/deformation.h"
 #include "softshell/engine/factor_cache.h"
+#include "softshell/engine/nonlinear_solver.h"
 #include "softshell/engine/shell_model.h"
 #include "softshell/engine/solver.h"
+#include "softshell/hold.h"
 #include "softshell/material.h"
 #include "softshell/result.h"
 #include "softshell/service/log.h"
@@ -52,6 +63,13 @@ struct ServiceOptions {
   /// Quadrature and limit-evaluation options of every precomputation (its `threads`,
   /// `progress` and `cancel` are set by the service).
   engine::PrecomputeOptions precompute;
+  /// What one follower of a geometry's results (an event stream) counts against `store_bytes`
+  /// (see `Service::subscribe`): its share of the memory the server keeps for it.
+  size_t follower_bytes = 4096;
+  /// Live holds one geometry takes at once (every hold-state solve combines all of them, so the
+  /// count bounds its cost). A PUT that would create one more is refused with kConflict (HTTP
+  /// 409) naming the limit; changes of existing holds are always taken.
+  size_t max_holds_per_geometry = 256;
   /// Where the service's messages go (precomputations started/finished/failed).
   Logger logger;
 };
@@ -61,10 +79,22 @@ struct StoredResult {
   uint32_t res_id = 0;                    ///< 1, 2, 3, ... per geometry, in the order stored
   std::vector<Vec3> positions;            ///< deformed control points (#V)
   DeformationRequest request;             ///< what was asked (for undo, replay, sharing)
-  engine::SolveStats stats;               ///< how it was solved
+  engine::SolveStats stats;               ///< how it was solved (linear model)
+  std::optional<engine::NonlinearStats> nonlinear;  ///< how it was solved, if with the nonlinear model
   std::chrono::system_clock::time_point stored_at;
+  /// For a result of the hold state: the version of every hold it includes (sorted by hold id;
+  /// empty when no hold is left and the object is at rest). Absent for `deform` results.
+  std::optional<HoldVersions> holds;
 
-  DeformationResult to_result() const { return {res_id, positions}; }
+  DeformationResult to_result() const {
+    DeformationResult r{res_id, positions};
+    if (nonlinear) {
+      r.model = DeformationModel::kNonlinear;
+      r.iterations = nonlinear->iterations;
+      r.residual = nonlinear->residual;
+    }
+    return r;
+  }
 };
 using ResultPtr = std::shared_ptr<const StoredResult>;
 
@@ -86,13 +116,79 @@ struct ServiceStats {
   uint64_t refused_no_memory = 0;       ///< uploads and results refused by the store budget
   Histogram::Snapshot solve_seconds;    ///< solve time (on a worker) of successful solves
   Histogram::Snapshot precompute_seconds;
+  // Holds (PROTOCOL.md version 2)
+  size_t holds = 0;                     ///< live holds over all geometries
+  size_t hold_changes_pending = 0;      ///< changes waiting for their geometry's next hold-state solve
+  size_t hold_states_unsolvable = 0;    ///< geometries whose remaining holds cannot be solved
+  uint64_t hold_solves = 0;             ///< hold-state solves (a batch of merged changes each)
+  uint64_t hold_changes_solved = 0;     ///< changes those solves took (/ hold_solves = merged per solve)
+  uint64_t hold_changes_superseded = 0; ///< changes replaced by a newer PUT of their hold before a solve took them
+  uint64_t hold_renewals = 0;           ///< PUTs that only renewed a lease
+  uint64_t hold_conflicts = 0;          ///< changes refused with kConflict (409)
+  uint64_t hold_rejections = 0;         ///< changes refused with kUnprocessable (422)
+  uint64_t leases_expired = 0;          ///< holds released because their lease lapsed
+  size_t followers = 0;                 ///< followers counted by subscriptions (event streams)
+  Histogram::Snapshot hold_solve_seconds;  ///< time of each hold-state solve (batch)
+};
+
+/// A change of a hold (`Service::put_hold`).
+struct HoldOptions {
+  /// The lease: without another PUT within it the hold is released (PROTOCOL.md: default 10 s,
+  /// at most 600 s; must be positive).
+  std::chrono::milliseconds ttl{10000};
+};
+
+/// What a PUT or DELETE of a hold is answered with once its change went through a solve.
+struct HoldOutcome {
+  /// The first stored result that includes the change (this version of the hold or a newer one;
+  /// for a release, the first one without the hold). Null when the change was accepted but the
+  /// hold state is unsolvable after a release merged into the same solve (see `Service::holds`).
+  ResultPtr result;
+};
+
+/// A registered change of a hold: its version at once, its outcome later.
+struct HoldTicket {
+  std::string hold_id;
+  uint64_t version = 0;  ///< the version this PUT made or renewed; for a release, the released one
+  bool renewal = false;  ///< the body equalled the hold's newest contents: lease renewed, no new version
+  /// Ready once the change is decided: the result, or kConflict (409: contradicts other holds,
+  /// or a release left the rest unsolvable), kUnprocessable (422), kResourceExhausted,
+  /// kUnavailable (shutting down).
+  std::shared_future<Result<HoldOutcome>> outcome;
+};
+
+/// Called with every result of one geometry stored after `Service::subscribe`, in id order,
+/// on the thread that stored it (a solve worker). It must return quickly, and must not destroy
+/// its own `Subscription`.
+using ResultListener = std::function<void(const ResultPtr&)>;
+
+/// A registration with a geometry's results (`Service::subscribe`). Destroying it unsubscribes;
+/// once the destructor has returned, the listener is not called again.
+class Subscription {
+ public:
+  ~Subscription();
+  Subscription(const Subscription&) = delete;
+  Subscription& operator=(const Subscription&) = delete;
+
+  /// The clients this registration serves (e.g. event streams sharing it); each counts
+  /// `ServiceOptions::follower_bytes` against the memory budget. kResourceExhausted (nothing
+  /// changed) if more do not fit.
+  Result<void> set_followers(size_t followers);
+  size_t followers() const;
+
+  struct State;  ///< (private)
+  explicit Subscription(std::shared_ptr<State> state);
+
+ private:
+  std::shared_ptr<State> state_;
 };
 
 /// The simulation service. See the file comment for the threading model.
 ///
 /// Errors: kInvalidArgument (malformed input, HTTP 400), kNotFound (404), kUnprocessable
 /// (unusable mesh or material, undetermined or inconsistent system, failed precomputation; 422),
-/// kResourceExhausted (the store budget; 507), kUnavailable (shutting down; 503).
+/// kResourceExhausted (the store budget; 507), kUnavailable (shutting down; 503), kConflict (a hold
+/// that contradicts other holds, or a release that leaves the rest unsolvable; 409).
 ///
 /// Thread-safety: every member function may be called concurrently from any number of threads.
 class Service {
@@ -143,24 +239,61 @@ class Service {
   /// The limit point and tangents at `point` as combinations of control points (available
   /// while the geometry is still precomputing). kInvalidArgument for a bad point.
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) const;
+  /// The geometry's limit evaluator (the surface the simulation uses; available while it
+  /// precomputes), for extensions that evaluate the surface (render tables). kNotFound if unknown.
+  Result<LimitEvaluator> limit_evaluator(const GeomId& id) const;
 
   /// Stresses of a stored result (softshell/stresses.h), computed on the calling thread:
   /// kNotFound for an unknown geometry or result, kInvalidArgument for a bad query (level outside
   /// 1..4, too many points, a point not on the surface).
   Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) const;
 
+  // --- holds (PROTOCOL.md version 2) --------------------------------------------------------
+
+  /// Creates the hold or replaces its contents, and renews its lease. A request equal to the
+  /// hold's newest contents only renews the lease (`renewal`, no new version, no solve). Errors
+  /// returned at once: kInvalidArgument (hold id, request, ttl), kNotFound, kUnprocessable (the
+  /// geometry's precomputation failed), kResourceExhausted, kUnavailable. Whether the change is
+  /// accepted is decided by the hold-state solve and reported through `outcome`; a refused change
+  /// leaves the hold with its previous contents (and a refused new hold is not created).
+  Result<HoldTicket> put_hold(const GeomId& id, const std::string& hold_id, DeformationRequest request,
+                              HoldOptions options = {});
+  /// Releases the hold at once; `outcome` is the first result without it, or kConflict naming
+  /// the cause when the remaining holds cannot be solved (the hold is released all the same and
+  /// the state is `kUnsolvable` until a change makes it solvable). kNotFound for an unknown hold.
+  Result<HoldTicket> release_hold(const GeomId& id, const std::string& hold_id);
+  /// The live holds (newest versions, including changes still waiting for the solve) and the
+  /// state of their solve.
+  Result<HoldList> holds(const GeomId& id) const;
+  /// One live hold and its newest contents; kNotFound if there is none by that id.
+  Result<HoldDetail> hold(const GeomId& id, const std::string& hold_id) const;
+
+  // --- subscriptions ------------------------------------------------------------------------
+
+  /// Calls `listener` with every result of the geometry stored from now on, in id order, until
+  /// the returned subscription is destroyed. The newest result stored before it is available
+  /// from `latest_result(id, have, 0)`, which a subscriber calls *after* subscribing (a result
+  /// may then be seen twice; ids tell). `followers` counts against the memory budget (see
+  /// `Subscription::set_followers`). kNotFound, kResourceExhausted, kUnavailable.
+  Result<std::unique_ptr<Subscription>> subscribe(const GeomId& id, ResultListener listener, size_t followers = 1);
+
   ServiceStats stats() const;
+  /// Every counter and gauge of `stats()` in Prometheus text format (families `softshell_*`),
+  /// for an HTTP front end to serve under `/metrics`.
+  std::string metrics_text() const;
   const ServiceOptions& options() const { return options_; }
 
   /// Refuses new work (kUnavailable), cancels running precomputations, answers requests that
-  /// wait for a precomputation and releases every `latest_result` waiter, then joins the pools
-  /// (solves already running finish first). Idempotent.
+  /// wait for a precomputation, hold changes that wait for a solve and every `latest_result`
+  /// waiter, stops ending leases, then joins the pools (solves already running finish first).
+  /// Idempotent.
   void shutdown();
   bool shutting_down() const;
 
  private:
   Result<UploadResult> upload_checked(ControlMesh mesh, const Material& material, std::string name_space);
-  struct Impl;
+  friend class Subscription;
+  struct Impl;  // defined in src/service_impl.h, shared by the service's source files
   ServiceOptions options_;
   std::unique_ptr<Impl> impl_;
 };

@@ -1,0 +1,83 @@
+#include "context.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+
+namespace softshell::demo {
+
+void Context::say(const std::string& line) const {
+  if (options.progress) options.progress(line);
+}
+
+DeformationResult Context::deform(const DeformationRequest& extra, const std::string& phase) {
+  DeformationRequest request = extra;
+  const DeformationRequest& s = stage.supports;
+  request.vertex_constraints.insert(request.vertex_constraints.end(), s.vertex_constraints.begin(), s.vertex_constraints.end());
+  request.lagrange_constraints.insert(request.lagrange_constraints.end(), s.lagrange_constraints.begin(),
+                                      s.lagrange_constraints.end());
+  request.limit_constraints.insert(request.limit_constraints.end(), s.limit_constraints.begin(), s.limit_constraints.end());
+  const auto start = Clock::now();
+  DeformationResult result = session->deform(id, request).value();
+  latencies.push_back(ms_between(start, Clock::now()));
+  timeline.stored(result.res_id);
+  report.last_res_id = std::max(report.last_res_id, result.res_id);
+  ++report.deformations;
+  shown = result.positions;
+  view->show(result.positions);
+  Response r = measure_shape(view->surface, view->rest_vertices, view->rest_normals);
+  r.res_id = result.res_id;
+  range.observe(phase, r);
+  return result;
+}
+
+double Context::probe_length() const {
+  // The model is linear, so a probe can be small enough to stay far inside the range anywhere.
+  return 1e-3 * std::min(options.material.thickness, LinearRange::kAimDisplacementPerSize * stage.size);
+}
+
+double Context::probe_force() const {
+  const double t = options.material.thickness;
+  return options.material.youngs_modulus * t * t * t / (stage.size * stage.size) * probe_length();
+}
+
+double Context::calibrate(const DeformationRequest& probe, const std::string& phase) {
+  const DeformationResult result = deform(probe, phase + " (probe)");
+  ++report.probes;
+  Response r = measure_shape(view->surface, view->rest_vertices, view->rest_normals);
+  if (auto field = stresses(result.res_id, 1)) {
+    add_stresses(r, *field, options.material);
+    range.observe_stresses(phase + " (probe)", *field, options.material);
+  }
+  const double scale = scale_to_aims(r, stage.size, options.material, yield);
+  if (std::getenv("SOFTSHELL_DEMO_DEBUG")) {
+    std::fprintf(stderr, "probe %s: |u| %.3g m, rotation %.3g rad, strain %.3g, nonlinearity %.3g -> scale %.3g\n",
+                 phase.c_str(), r.displacement, r.rotation, r.strain.value_or(-1.0), r.nonlinearity().value_or(-1.0), scale);
+  }
+  return scale * options.load_scale;
+}
+
+void Context::check_stresses(const std::string& phase) {
+  const Response worst = range.worst(phase);
+  if (worst.res_id == 0) return;
+  if (auto field = stresses(worst.res_id, 1)) range.observe_stresses(phase, *field, options.material);
+}
+
+std::optional<StressField> Context::stresses(uint32_t res_id, int level) {
+  if (stresses_unavailable_) return std::nullopt;
+  std::string why_not;
+  auto field = stresses_of(*session, id, res_id, level, yield, why_not);
+  if (!field) {
+    stresses_unavailable_ = true;
+    report.notes.push_back(why_not);
+    say(why_not);
+  }
+  return field;
+}
+
+Snapshot& Context::snapshot(const std::string& file, const std::string& caption) {
+  snapshots.push_back({file, caption, shown, {}, {}, {}});
+  return snapshots.back();
+}
+
+}  // namespace softshell::demo

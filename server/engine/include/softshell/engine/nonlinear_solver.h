@@ -1,0 +1,121 @@
+#pragma once
+/// \file
+/// \brief `NonlinearSolver`: equilibrium of the geometrically nonlinear Kirchhoff-Love shell
+/// (large displacements and rotations, small strains; PROTOCOL.md "The nonlinear model").
+
+#include <cstdint>
+#include <memory>
+#include <mutex>
+
+#include <Eigen/Core>
+
+#include "softshell/deformation.h"
+#include "softshell/engine/factor_cache.h"
+#include "softshell/engine/shell_model.h"
+#include "softshell/executor.h"
+#include "softshell/result.h"
+
+namespace softshell::engine {
+
+namespace internal {
+class NonlinearShell;
+struct NonlinearMemory;
+}  // namespace internal
+
+/// Limits and tolerances of a nonlinear solve.
+struct NonlinearOptions {
+  /// Converged when the out-of-balance force (loads minus internal forces, less the constraint
+  /// reactions) is below this fraction of the forces acting (loads, internal forces, reactions).
+  double tolerance = 1e-8;
+  /// Iterations (each one evaluation of the internal forces) over all load steps.
+  int max_iterations = 1000;
+  /// Load steps: a request the solver cannot bring to equilibrium in one step is approached in
+  /// smaller ones, at most this many, none smaller than 1/1024 of the whole.
+  int max_load_steps = 64;
+  /// Where the internal forces and tangents are computed (the host's threads); empty =
+  /// softshell::default_executor().
+  std::shared_ptr<Executor> executor;
+  /// At most this many of the executor's threads work on one solve (0 = all of them).
+  int threads = 0;
+  /// Gauss points per direction on each (sub-)face of the rule the preconditioner's tangent is
+  /// integrated with (0: the model's own rule). The Newton directions always use the exact
+  /// tangent and the residual the model's rule; a coarser rule only makes refreshing the
+  /// preconditioner cheaper. Range 0..10.
+  int tangent_gauss_points = 4;
+};
+
+/// What a nonlinear solve did.
+struct NonlinearStats {
+  int32_t iterations = 0;         ///< nonlinear iterations (directions computed), all load steps
+  int32_t evaluations = 0;        ///< evaluations of the internal forces (iterations + line searches)
+  int32_t load_steps = 0;         ///< 1 when the request converged in one step
+  int32_t krylov_iterations = 0;  ///< GMRES iterations (each one tangent product and one solve)
+  int32_t factorizations = 0;     ///< tangent stiffness factorizations
+  double residual = 0.0;          ///< final relative out-of-balance force (< tolerance)
+  /// The answer's check (the safety net): the largest residual / allowance over the nonlinear
+  /// equilibrium and every constraint row (<= 1; an answer that fails it is refused).
+  double check_ratio = 0.0;
+  double strain_energy = 0.0;     ///< J
+  double solve_ms = 0.0;          ///< total
+  double evaluate_ms = 0.0;       ///< of which evaluating internal forces
+  double krylov_ms = 0.0;         ///< of which GMRES (tangent products and preconditioner solves)
+  double tangent_ms = 0.0;        ///< of which assembling and factorizing tangents
+};
+
+/// A nonlinear equilibrium.
+struct NonlinearSolution {
+  Eigen::VectorXd displacement;  ///< 3n: DOF 3i + a is axis a of control point i
+  NonlinearStats stats;
+};
+
+/// Solves deformation requests with the nonlinear model: total Lagrangian Kirchhoff-Love shell
+/// with exact Green-Lagrange membrane strains and the exact change of curvature of the deformed
+/// limit surface, St. Venant-Kirchhoff material with the model's E, nu, t (the linear model is its
+/// first-order term). Forces and `surface_load` keep their direction; `pressure` follows the
+/// deformed normal. Vertex, Lagrange and limit constraints are linear in the control points, as
+/// in the linear model.
+///
+/// Equilibrium by inexact Newton iterations: each Newton direction solves the exact tangent
+/// stiffness by GMRES, preconditioned by the cached linear factor at rest and by a tangent
+/// factored at a deformed state once the Krylov iterations slow down; load steps chosen by the
+/// solver when one step is too large.
+///
+/// Errors: those of the linear `Solver` (kInvalidArgument, kUnprocessable for undetermined or
+/// contradictory constraints), and kUnprocessable for a request the solver cannot bring to
+/// equilibrium within its limits (the message says how far it got and what to try). Never
+/// returns NaN or an unconverged displacement.
+///
+/// Thread-safety: `solve` may be called from many threads at once. The solver remembers the last
+/// tangent factor and the curvature information of its last solve, which the next solve starting
+/// from that solve's answer (a drag) reuses.
+class NonlinearSolver {
+ public:
+  NonlinearSolver(std::shared_ptr<const ShellModel> model, std::shared_ptr<FactorCache> cache,
+                  NonlinearOptions options = {});
+  ~NonlinearSolver();
+  NonlinearSolver(const NonlinearSolver&) = delete;
+  NonlinearSolver& operator=(const NonlinearSolver&) = delete;
+
+  /// From the rest state.
+  Result<NonlinearSolution> solve(const DeformationRequest& request) const;
+  /// From `initial` (3n), e.g. the previous answer of a drag: much faster when it is close to the
+  /// answer. Any displacement is accepted; the answer does not depend on it unless the request
+  /// has several equilibria (the solver finds the one reached from `initial`).
+  Result<NonlinearSolution> solve(const DeformationRequest& request, const Eigen::VectorXd& initial) const;
+
+  const ShellModel& model() const { return *model_; }
+  const NonlinearOptions& options() const { return options_; }
+
+ private:
+  std::shared_ptr<const internal::NonlinearShell> shell() const;
+  Result<NonlinearSolution> solve_from(const DeformationRequest& request, const Eigen::VectorXd* initial) const;
+
+  std::shared_ptr<const ShellModel> model_;
+  std::shared_ptr<FactorCache> cache_;
+  NonlinearOptions options_;
+  mutable std::mutex mutex_;  // guards shell_ and memory_
+  mutable std::shared_ptr<const internal::NonlinearShell> shell_;
+  mutable std::shared_ptr<const internal::NonlinearMemory> memory_;
+};
+
+}  // namespace softshell::engine

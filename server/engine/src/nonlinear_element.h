@@ -1,0 +1,65 @@
+#pragma once
+// The per-element kernels of the nonlinear Kirchhoff-Love shell (private): internal forces,
+// tangent products and element tangents over an element's quadrature points, given its basis
+// (see nonlinear_shell.h for the model and the formulas). Plain pointers and sizes, so that the
+// hot loops can be compiled for two instruction sets and picked at load time.
+
+#include <cstddef>
+
+#include <Eigen/Core>
+
+namespace softshell::engine::internal::nonlinear_kernel {
+
+// Per quadrature point, reference data (kRef doubles):
+//   0 A1, 3 A2, 6 A11, 9 A12, 12 A22 (tangents and second derivatives), 15 A1 x A2, 18 J = |A1 x A2|,
+//   19 N (unit normal), 22 membrane matrix dA t C, 28 bending matrix dA t^3/12 C (symmetric, packed
+//   00 11 22 01 02 12), 34 parameter weight (the Gauss weight times the cell area).
+constexpr int kRef = 35;
+// Per quadrature point, deformed state (kState doubles):
+//   0 a1, 3 a2, 6 a11, 9 a12, 12 a22, 15 n, 18 j, 19 membrane forces N (n11 n22 n12),
+//   22 bending moments M (m11 m22 m12), 25 H = sum m_ab a_ab, 28 g = (I - n n^T) H / j.
+constexpr int kState = 31;
+// Derivative rows of an element's basis: 0 N, 1 ,u, 2 ,v, 3 ,uu, 4 ,uv, 5 ,vv.
+constexpr int kRows = 6;
+
+using V3 = Eigen::Vector3d;
+// Always inlined: the kernels are compiled with their own options, which block plain inlining.
+[[gnu::always_inline]] inline V3 load3(const double* p) { return V3(p[0], p[1], p[2]); }
+[[gnu::always_inline]] inline void store3(double* p, const V3& v) {
+  p[0] = v[0];
+  p[1] = v[1];
+  p[2] = v[2];
+}
+// Derivative order of basis row d (N; N,u, N,v; N,uu, N,uv, N,vv).
+constexpr int kOrder[kRows] = {0, 1, 1, 2, 2, 2};
+
+// What the per-element kernels need of an element (plain pointers, so the kernels can be
+// compiled for two targets).
+struct PieceView {
+  const double* w;
+  Eigen::Index w_rows, first, points;
+  double size;
+};
+
+/// Internal forces (and the pressure force per unit pressure) of one element from its local
+/// displacements u (m x 3, column-major), with the per-point reference and state arrays of its
+/// points (the state is written). Scratch arrays values, coef of 18P. Returns false at a
+/// degenerate point.
+bool element_forces(const PieceView* pieces, size_t count, const double* bernstein, Eigen::Index p, Eigen::Index m,
+                    const double* u, const double* reference, double* state, bool pressure, double* values,
+                    double* coef, double* force, double* pressure_force, double& energy, double& gradient);
+
+/// out (m x 3) += the element's tangent product for local values v (m x 3).
+void element_tangent(const PieceView* pieces, size_t count, const double* bernstein, Eigen::Index p, Eigen::Index m,
+                     const double* v, const double* reference, const double* state, double pressure, double* values,
+                     double* coef, double* out);
+
+/// The element's tangent matrix (3m x 3m) from its full basis (6P x m, row d P + q).
+void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen::Index m, const double* reference,
+                            const double* state, double pressure, Eigen::MatrixXd& ke);
+
+/// The unit cell's bicubic Bernstein basis and its derivatives at the n x n Gauss points (row
+/// d n^2 + j n + i, column a + 4 b for B_a(u) B_b(v)).
+Eigen::MatrixXd bernstein_basis(int n);
+
+}  // namespace softshell::engine::internal::nonlinear_kernel

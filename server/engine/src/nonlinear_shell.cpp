@@ -1,0 +1,383 @@
+#include "nonlinear_shell.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include <Eigen/Dense>
+
+#include "kirchhoff_love.h"
+#include "nonlinear_element.h"
+#include "quadrature.h"
+
+namespace softshell::engine::internal {
+
+using namespace nonlinear_kernel;
+using V3 = Eigen::Vector3d;
+
+int NonlinearShell::workers(int requested) const {
+  const int most = executor_->concurrency();
+  return requested > 0 ? std::min(requested, most) : most;
+}
+
+template <class Fn>
+void NonlinearShell::for_each_element(const Rule& rule, Fn&& fn) const {
+  // Chunks of about the same number of points, so both threads finish together.
+  constexpr size_t kPointsPerChunk = 1024;
+  const int threads = rule.points < 2 * kPointsPerChunk ? 1 : workers(threads_);
+  if (threads == 1) {
+    for (size_t e = 0; e < rule.elements.size(); ++e) fn(e);
+    return;
+  }
+  std::vector<size_t> starts{0};
+  size_t points = 0;
+  for (size_t e = 0; e < rule.elements.size(); ++e) {
+    points += static_cast<size_t>(rule.elements[e].points);
+    if (points >= kPointsPerChunk) {
+      starts.push_back(e + 1);
+      points = 0;
+    }
+  }
+  if (starts.back() != rule.elements.size()) starts.push_back(rule.elements.size());
+  executor_->parallel_for(0, static_cast<int64_t>(starts.size() - 1), [&](int64_t c) {
+    for (size_t e = starts[static_cast<size_t>(c)]; e < starts[static_cast<size_t>(c) + 1]; ++e) fn(e);
+  }, threads);
+}
+
+void NonlinearShell::build_rule(const std::vector<Cell>& cells, int gauss, int threads, Rule& rule) const {
+  const ShellModel& m = *model_;
+  rule.elements.resize(cells.size());
+  size_t points = 0;
+  for (size_t c = 0; c < cells.size(); ++c) {
+    rule.elements[c].first_point = points;
+    rule.elements[c].points = static_cast<Eigen::Index>(cells[c].uvs.size());
+    points += cells[c].uvs.size();
+  }
+  rule.points = points;
+  rule.reference.assign(kRef * points, 0.0);
+  rule.gauss = gauss;
+  rule.bernstein = bernstein_basis(gauss);
+  rule.bernstein_t = rule.bernstein.transpose();
+  const Eigen::HouseholderQR<Eigen::MatrixXd> bernstein_qr(rule.bernstein);
+  std::vector<double> gp, gw;
+  gauss_legendre_01(gauss, gp, gw);
+  const Eigen::SparseMatrix<double>& k = m.stiffness();
+  const Material& mat = m.material();
+  const double t = mat.thickness;
+  executor_->parallel_for(0, static_cast<int64_t>(cells.size()), [&](int64_t ci) {
+    const Cell& cell = cells[static_cast<size_t>(ci)];
+    Element& e = rule.elements[static_cast<size_t>(ci)];
+    const auto p = e.points;
+    Eigen::MatrixXd bfr;  // 6P x m, rows 6q + d
+    m.evaluator().face_stencils(cell.face, cell.subface, cell.uvs, e.indices, bfr);
+    const auto mm = static_cast<Eigen::Index>(e.indices.size());
+    Eigen::MatrixXd basis(kRows * p, mm);
+    for (Eigen::Index q = 0; q < p; ++q) {
+      for (int d = 0; d < kRows; ++d) basis.row(d * p + q) = bfr.row(kRows * q + d);
+    }
+    Eigen::MatrixX3d x(mm, 3);
+    for (Eigen::Index a = 0; a < mm; ++a) {
+      x.row(a) = m.mesh().positions()[static_cast<size_t>(e.indices[static_cast<size_t>(a)])].transpose();
+    }
+    const Eigen::MatrixX3d deriv = basis * x;
+    SurfaceFrame frame;
+    for (Eigen::Index q = 0; q < p; ++q) {
+      // The same frame and material matrix the linear model was integrated with.
+      if (!compute_frame(bfr.middleRows(kRows * q, kRows), x, mat.youngs_modulus, mat.poisson_ratio, frame)) {
+        fail(ErrorCode::kUnprocessable, "nonlinear shell: the limit surface of face " + std::to_string(cell.face) +
+                                            " is degenerate at a quadrature point");
+      }
+      double* ref = rule.reference.data() + kRef * (e.first_point + static_cast<size_t>(q));
+      for (int d = 1; d < kRows; ++d) store3(ref + 3 * (d - 1), deriv.row(d * p + q).transpose());
+      const V3 t3 = load3(ref).cross(load3(ref + 3));
+      store3(ref + 15, t3);
+      ref[18] = t3.norm();
+      store3(ref + 19, t3 / t3.norm());
+      const double weight = cell.weights[static_cast<size_t>(q)];
+      const double da = weight * frame.j;
+      const Eigen::Matrix3d& c = frame.material;
+      const double packed[6] = {c(0, 0), c(1, 1), c(2, 2), c(0, 1), c(0, 2), c(1, 2)};
+      for (int i = 0; i < 6; ++i) {
+        ref[22 + i] = da * t * packed[i];
+        ref[28 + i] = da * t * t * t / 12.0 * packed[i];
+      }
+      ref[34] = weight;
+    }
+    // Pieces: each run of gauss^2 points that is a square cell of the rule (points at u0 + s g_i,
+    // v0 + s g_j, weights s^2 w_i w_j) and on which the basis is a bicubic polynomial to
+    // round-off keeps 16 Bernstein coefficients per control point instead of its weights.
+    const Eigen::Index cell_points = static_cast<Eigen::Index>(gauss) * gauss;
+    auto take_weights = [&](Eigen::Index first, Eigen::Index count) {
+      Piece piece;
+      piece.first = first;
+      piece.points = count;
+      piece.w.resize(kRows * count, mm);
+      for (int d = 0; d < kRows; ++d) piece.w.middleRows(d * count, count) = basis.middleRows(d * p + first, count);
+      return piece;
+    };
+    if (p % cell_points != 0) {
+      e.pieces.push_back(take_weights(0, p));
+    } else {
+      for (Eigen::Index first = 0; first < p; first += cell_points) {
+        double area = 0.0;
+        for (Eigen::Index q = first; q < first + cell_points; ++q) area += cell.weights[static_cast<size_t>(q)];
+        const double size = std::sqrt(area);
+        const double u0 = cell.uvs[static_cast<size_t>(first)][0] - size * gp[0];
+        const double v0 = cell.uvs[static_cast<size_t>(first)][1] - size * gp[0];
+        bool square = size > 0.0;
+        for (Eigen::Index q = 0; q < cell_points && square; ++q) {
+          const auto& uv = cell.uvs[static_cast<size_t>(first + q)];
+          square = std::abs(uv[0] - (u0 + size * gp[static_cast<size_t>(q % gauss)])) <= 1e-12 &&
+                   std::abs(uv[1] - (v0 + size * gp[static_cast<size_t>(q / gauss)])) <= 1e-12;
+        }
+        Piece piece = take_weights(first, cell_points);
+        if (square) {
+          // Fit on the unit cell: derivatives of order k carry size^k.
+          Eigen::MatrixXd scaled = piece.w;
+          for (int d = 0; d < kRows; ++d) scaled.middleRows(d * cell_points, cell_points) *= std::pow(size, kOrder[d]);
+          const Eigen::MatrixXd coef = bernstein_qr.solve(scaled);
+          const Eigen::MatrixXd back = rule.bernstein * coef;
+          bool exact = true;
+          const double overall = scaled.cwiseAbs().maxCoeff();
+          for (int d = 0; d < kRows && exact; ++d) {
+            const auto block = scaled.middleRows(d * cell_points, cell_points);
+            const double top = std::max(block.cwiseAbs().maxCoeff(), 1e-6 * overall);
+            exact = (back.middleRows(d * cell_points, cell_points) - block).cwiseAbs().maxCoeff() <= 1e-13 * top;
+          }
+          if (exact) {
+            piece.w = coef;
+            piece.size = size;
+          }
+        }
+        e.pieces.push_back(std::move(piece));
+      }
+    }
+    // Where each (a, b) block of the element lands in K's value array.
+    e.offsets.resize(static_cast<size_t>(mm * mm));
+    for (Eigen::Index bl = 0; bl < mm; ++bl) {
+      const int col = 3 * e.indices[static_cast<size_t>(bl)];
+      const int* begin = k.innerIndexPtr() + k.outerIndexPtr()[col];
+      const int* end = k.innerIndexPtr() + k.outerIndexPtr()[col + 1];
+      for (Eigen::Index al = 0; al < mm; ++al) {
+        const int row = 3 * e.indices[static_cast<size_t>(al)];
+        const int* it = std::lower_bound(begin, end, row);
+        if (it == end || *it != row || end - it < 3 || it[2] != row + 2) {
+          fail(ErrorCode::kInternal, "nonlinear shell: the stiffness pattern lacks an element's block");
+        }
+        e.offsets[static_cast<size_t>(al + mm * bl)] = static_cast<int32_t>(it - begin);
+      }
+    }
+  }, workers(threads));
+}
+
+std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<const ShellModel> model, int threads,
+                                                            int jacobian_gauss_points,
+                                                            std::shared_ptr<Executor> executor) {
+  if (!model) fail(ErrorCode::kInvalidArgument, "NonlinearShell needs a model");
+  if (jacobian_gauss_points < 0 || jacobian_gauss_points > 10) {
+    fail(ErrorCode::kInvalidArgument, "NonlinearShell: jacobian_gauss_points must be 0..10");
+  }
+  std::shared_ptr<NonlinearShell> shell(new NonlinearShell());
+  shell->model_ = model;
+  shell->threads_ = threads;
+  shell->executor_ = executor ? std::move(executor) : default_executor();
+  const ShellModel& m = *model;
+  // The model's rule: the runs of quadrature points on one (face, sub-face), in the order K was
+  // built.
+  std::vector<Cell> cells;
+  const std::vector<QuadraturePoint>& quad = m.quadrature();
+  for (size_t q = 0; q < quad.size(); ++q) {
+    if (q == 0 || quad[q].point.face != quad[q - 1].point.face || quad[q].point.subface != quad[q - 1].point.subface) {
+      cells.push_back(Cell{quad[q].point.face, quad[q].point.subface, {}, {}});
+    }
+    cells.back().uvs.push_back({quad[q].point.u, quad[q].point.v});
+    cells.back().weights.push_back(quad[q].weight);
+  }
+  shell->build_rule(cells, m.options().quadrature.gauss_points, threads, shell->fine_);
+  if (jacobian_gauss_points > 0) {
+    std::vector<double> gp, gw;
+    gauss_legendre_01(jacobian_gauss_points, gp, gw);
+    for (Cell& cell : cells) {
+      cell.uvs.clear();
+      cell.weights.clear();
+      for (size_t j = 0; j < gp.size(); ++j) {
+        for (size_t i = 0; i < gp.size(); ++i) {
+          cell.uvs.push_back({gp[i], gp[j]});
+          cell.weights.push_back(gw[i] * gw[j]);
+        }
+      }
+    }
+    shell->build_rule(cells, jacobian_gauss_points, threads, shell->coarse_);
+  }
+  return shell;
+}
+
+Eigen::MatrixXd NonlinearShell::element_basis(const Rule& rule, const Element& e) {
+  const auto p = e.points;
+  Eigen::MatrixXd basis(kRows * p, static_cast<Eigen::Index>(e.indices.size()));
+  for (const Piece& piece : e.pieces) {
+    const Eigen::Index n = piece.points;
+    if (piece.size > 0.0) {
+      const Eigen::MatrixXd w = rule.bernstein * piece.w;
+      for (int d = 0; d < kRows; ++d) {
+        basis.middleRows(d * p + piece.first, n) = w.middleRows(d * n, n) / std::pow(piece.size, kOrder[d]);
+      }
+    } else {
+      for (int d = 0; d < kRows; ++d) basis.middleRows(d * p + piece.first, n) = piece.w.middleRows(d * n, n);
+    }
+  }
+  return basis;
+}
+
+size_t NonlinearShell::memory_bytes() const {
+  size_t bytes = sizeof(*this);
+  for (const Rule* rule : {&fine_, &coarse_}) {
+    bytes += rule->reference.size() * sizeof(double);
+    for (const Element& e : rule->elements) {
+      bytes += sizeof(Element) + (e.indices.size() + e.offsets.size()) * sizeof(int32_t);
+      for (const Piece& piece : e.pieces) bytes += sizeof(Piece) + static_cast<size_t>(piece.w.size()) * sizeof(double);
+    }
+  }
+  return bytes;
+}
+
+bool NonlinearShell::evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const {
+  return evaluate_rule(fine_, u, state, with_pressure);
+}
+
+bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, ShellState& state,
+                                   bool with_pressure) const {
+  const int32_t ndof = num_dofs();
+  if (u.size() != ndof) fail(ErrorCode::kInvalidArgument, "nonlinear shell: the displacement must have 3n entries");
+  state.displacement = u;
+  state.points.resize(kState * rule.points);
+  const size_t ne = rule.elements.size();
+  std::vector<Eigen::MatrixX3d> element_force(ne), element_pressure(with_pressure ? ne : 0);
+  std::vector<double> element_energy(ne, 0.0), element_gradient(ne, 0.0);
+  std::vector<char> element_ok(ne, 1);
+  for_each_element(rule, [&](size_t ei) {
+    const Element& e = rule.elements[ei];
+    const auto p = e.points;
+    const auto m = static_cast<Eigen::Index>(e.indices.size());
+    Eigen::MatrixX3d local(m, 3);
+    for (Eigen::Index a = 0; a < m; ++a) local.row(a) = u.segment<3>(3 * e.indices[static_cast<size_t>(a)]).transpose();
+    std::vector<double> values(static_cast<size_t>(18 * p)), coef(static_cast<size_t>(18 * p));
+    std::vector<PieceView> pieces;
+    for (const Piece& pc : e.pieces) pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size});
+    element_force[ei].setZero(m, 3);
+    if (with_pressure) element_pressure[ei].setZero(m, 3);
+    double energy = 0.0, gradient = 0.0;
+    element_ok[ei] = element_forces(pieces.data(), pieces.size(), rule.bernstein_t.data(), p, m, local.data(),
+                                    rule.reference.data() + kRef * e.first_point,
+                                    state.points.data() + kState * e.first_point, with_pressure, values.data(),
+                                    coef.data(), element_force[ei].data(),
+                                    with_pressure ? element_pressure[ei].data() : nullptr, energy, gradient);
+    element_energy[ei] = energy;
+    element_gradient[ei] = gradient;
+  });
+  state.valid = std::all_of(element_ok.begin(), element_ok.end(), [](char ok) { return ok != 0; });
+  state.energy = 0.0;
+  state.max_gradient = ne ? *std::max_element(element_gradient.begin(), element_gradient.end()) : 0.0;
+  state.internal_force.setZero(ndof);
+  state.pressure_force.setZero(with_pressure ? ndof : 0);
+  if (!state.valid) return false;
+  for (size_t ei = 0; ei < ne; ++ei) {
+    const Element& e = rule.elements[ei];
+    state.energy += element_energy[ei];
+    for (size_t a = 0; a < e.indices.size(); ++a) {
+      state.internal_force.segment<3>(3 * e.indices[a]) += element_force[ei].row(static_cast<Eigen::Index>(a)).transpose();
+      if (with_pressure) {
+        state.pressure_force.segment<3>(3 * e.indices[a]) += element_pressure[ei].row(static_cast<Eigen::Index>(a)).transpose();
+      }
+    }
+  }
+  state.valid = std::isfinite(state.energy) && state.internal_force.allFinite() &&
+                (!with_pressure || state.pressure_force.allFinite());
+  return state.valid;
+}
+
+void NonlinearShell::tangent_product(const ShellState& state, double pressure, const Eigen::MatrixXd& v,
+                                     Eigen::MatrixXd& out) const {
+  const int32_t ndof = num_dofs();
+  const Rule& rule = fine_;
+  if (!state.valid || v.rows() != ndof || state.points.size() != kState * rule.points) {
+    fail(ErrorCode::kInternal, "nonlinear shell: tangent product of a bad state");
+  }
+  const Eigen::Index cols = v.cols();
+  std::vector<Eigen::MatrixXd> element_out(rule.elements.size());
+  for_each_element(rule, [&](size_t ei) {
+    const Element& e = rule.elements[ei];
+    const auto p = e.points;
+    const auto m = static_cast<Eigen::Index>(e.indices.size());
+    Eigen::MatrixX3d local(m, 3);
+    std::vector<double> values(static_cast<size_t>(18 * p)), coef(static_cast<size_t>(18 * p));
+    std::vector<PieceView> pieces;
+    for (const Piece& pc : e.pieces) pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size});
+    Eigen::MatrixXd& result = element_out[ei];
+    result.setZero(m, 3 * cols);
+    for (Eigen::Index col = 0; col < cols; ++col) {
+      for (Eigen::Index a = 0; a < m; ++a) local.row(a) = v.block<3, 1>(3 * e.indices[static_cast<size_t>(a)], col).transpose();
+      element_tangent(pieces.data(), pieces.size(), rule.bernstein_t.data(), p, m, local.data(),
+                      rule.reference.data() + kRef * e.first_point, state.points.data() + kState * e.first_point,
+                      pressure, values.data(), coef.data(), result.data() + 3 * col * m);
+    }
+  });
+  out.setZero(ndof, cols);
+  for (size_t ei = 0; ei < rule.elements.size(); ++ei) {
+    const Element& e = rule.elements[ei];
+    const auto m = static_cast<Eigen::Index>(e.indices.size());
+    for (Eigen::Index a = 0; a < m; ++a) {
+      for (Eigen::Index c = 0; c < cols; ++c) {
+        for (int i = 0; i < 3; ++i) out(3 * e.indices[static_cast<size_t>(a)] + i, c) += element_out[ei](a, 3 * c + i);
+      }
+    }
+  }
+}
+
+void NonlinearShell::assemble_tangent(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const {
+  assemble_rule(fine_, state, pressure, out);
+}
+
+bool NonlinearShell::assemble_jacobian(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const {
+  if (!has_jacobian_rule()) {
+    assemble_rule(fine_, state, pressure, out);
+    return true;
+  }
+  ShellState coarse;
+  if (!evaluate_rule(coarse_, state.displacement, coarse, false)) return false;
+  assemble_rule(coarse_, coarse, pressure, out);
+  return true;
+}
+
+void NonlinearShell::assemble_rule(const Rule& rule, const ShellState& state, double pressure,
+                                   Eigen::SparseMatrix<double>& out) const {
+  if (!state.valid || state.points.size() != kState * rule.points) {
+    fail(ErrorCode::kInternal, "nonlinear shell: tangent of a bad state");
+  }
+  const Eigen::SparseMatrix<double>& k = model_->stiffness();
+  out = k;  // the pattern; values overwritten below
+  std::fill(out.valuePtr(), out.valuePtr() + out.nonZeros(), 0.0);
+  std::vector<Eigen::MatrixXd> element_k(rule.elements.size());
+  for_each_element(rule, [&](size_t ei) {
+    const Element& e = rule.elements[ei];
+    element_tangent_matrix(element_basis(rule, e), e.points, static_cast<Eigen::Index>(e.indices.size()),
+                           rule.reference.data() + kRef * e.first_point, state.points.data() + kState * e.first_point,
+                           pressure, element_k[ei]);
+  });
+  for (size_t ei = 0; ei < rule.elements.size(); ++ei) {
+    const Element& e = rule.elements[ei];
+    const auto m = static_cast<Eigen::Index>(e.indices.size());
+    const Eigen::MatrixXd& ke = element_k[ei];
+    for (Eigen::Index bl = 0; bl < m; ++bl) {
+      for (int j = 0; j < 3; ++j) {
+        double* column = out.valuePtr() + out.outerIndexPtr()[3 * e.indices[static_cast<size_t>(bl)] + j];
+        for (Eigen::Index al = 0; al < m; ++al) {
+          double* block = column + e.offsets[static_cast<size_t>(al + m * bl)];
+          for (int i = 0; i < 3; ++i) block[i] += ke(3 * al + i, 3 * bl + j);
+        }
+      }
+    }
+  }
+}
+
+}  // namespace softshell::engine::internal

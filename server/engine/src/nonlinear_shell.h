@@ -1,0 +1,136 @@
+#pragma once
+// The geometrically nonlinear Kirchhoff-Love shell (private to the engine): total Lagrangian,
+// exact Green-Lagrange membrane strains and the exact change of curvature of the deformed limit
+// surface (Kiendl et al. 2009/2015), St. Venant-Kirchhoff material.
+//
+// Same quadrature points and weights, basis and material matrices as the linear model
+// (kirchhoff_love.h), so its first-order term is K: at u = 0 the internal forces vanish and the
+// tangent is K to round-off. The basis (N and its first and second derivatives) is evaluated once
+// per model and kept here; a solve only recomputes the deformed frames.
+//
+// Per quadrature point, with A_a the reference tangents, a_a = A_a + u,a the deformed ones,
+// n the deformed unit normal:
+//   membrane strain  e = [1/2 (a1.a1 - A1.A1), 1/2 (a2.a2 - A2.A2), a1.a2 - A1.A2]
+//   curvature change k = [B11 - b11, B22 - b22, 2 (B12 - b12)],   b_ab = a_a,b . n
+//   energy density   1/2 e^T (t C) e + 1/2 k^T (t^3/12 C) k,  C the reference contravariant matrix
+// Strains are computed from u,a and the reference frame without subtracting large numbers, so
+// small deformations keep their relative accuracy.
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include "softshell/engine/shell_model.h"
+#include "softshell/executor.h"
+
+namespace softshell::engine::internal {
+
+/// The deformed state of the shell at a displacement: per-point frames and stress resultants
+/// (what tangent products need), strain energy and internal forces.
+struct ShellState {
+  Eigen::VectorXd displacement;    ///< 3n
+  bool valid = false;              ///< false: some area element is zero, inverted or not finite
+  double energy = 0.0;             ///< strain energy (J)
+  Eigen::VectorXd internal_force;  ///< 3n: f_int = dW/du (N)
+  /// 3n: the follower pressure force per unit pressure, integral of N_A n da over the deformed
+  /// surface (zero-sized unless asked for).
+  Eigen::VectorXd pressure_force;
+  /// Largest displacement gradient |u,a| / |A_a| over the points: the internal forces are
+  /// accurate to about eps E t h times it (round-off of strains that cancel in a rotation).
+  double max_gradient = 0.0;
+  std::vector<double> points;      ///< per quadrature point, kPointState doubles (see .cpp)
+};
+
+class NonlinearShell {
+ public:
+  /// Evaluates the basis at every quadrature point of `model` (the points and weights its K was
+  /// integrated with). The per-element work runs on `executor` (empty: softshell::default_executor()),
+  /// on at most `threads` of its threads (0 = all of them). `jacobian_gauss_points` > 0 adds a
+  /// second, coarse rule (that many Gauss points per direction on every (sub-)face, no
+  /// refinement) for `assemble_jacobian`: a tangent at the current state at a fraction of the
+  /// cost, for the solver's linear solves (the residual always uses the model's rule).
+  static std::shared_ptr<const NonlinearShell> build(std::shared_ptr<const ShellModel> model, int threads = 0,
+                                                     int jacobian_gauss_points = 0,
+                                                     std::shared_ptr<Executor> executor = nullptr);
+
+  const ShellModel& model() const { return *model_; }
+  int32_t num_dofs() const { return model_->num_dofs(); }
+  size_t num_points() const { return fine_.points; }
+  size_t memory_bytes() const;
+
+  /// At most this many of the executor's threads for the per-element work (0 = all); small models
+  /// use one.
+  void set_threads(int threads) { threads_ = threads; }
+
+  /// Evaluates the state at displacement `u` (3n). `with_pressure`: also the follower pressure
+  /// force. Returns state.valid.
+  bool evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const;
+
+  /// out = (K_T(u) - pressure K_p(u)) v for the columns of v (3n x k): the derivative of
+  /// f_int - pressure * f_p at the state (K_p: the load stiffness of the follower pressure).
+  void tangent_product(const ShellState& state, double pressure, const Eigen::MatrixXd& v, Eigen::MatrixXd& out) const;
+
+  /// The assembled tangent K_T(u) - pressure sym(K_p(u)) on the sparsity pattern of the model's
+  /// K (full symmetric, CSC). The load stiffness of a pressure is not symmetric on an open
+  /// surface; its symmetric part is what a Cholesky factor can take.
+  void assemble_tangent(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
+
+  /// The same tangent integrated with the coarse rule (the exact one if there is none).
+  /// Returns false if the state is degenerate at a coarse point.
+  bool assemble_jacobian(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
+  bool has_jacobian_rule() const { return coarse_.points > 0; }
+
+ private:
+  // A run of an element's points. Where the run is one cell of the quadrature (n x n Gauss points
+  // on a square) inside one polynomial piece of the limit surface (a regular patch, or a
+  // sub-patch of an extraordinary face's patch tree), its basis is exactly the rule's bicubic
+  // Bernstein basis at the cell's points times 16 x m coefficients: 1/6 of the weights to store
+  // and stream through memory, the bottleneck of a pass over the points. Other runs keep them.
+  struct Piece {
+    Eigen::Index first = 0;   // first point within the element
+    Eigen::Index points = 0;
+    double size = 0.0;        // > 0: w holds Bernstein coefficients (16 x m) on a cell of this edge length
+    Eigen::MatrixXd w;        // otherwise the weights, 6 points x m: row d * points + q
+  };
+  struct Element {
+    std::vector<int32_t> indices;  // m control points
+    std::vector<Piece> pieces;
+    size_t first_point = 0;        // into the per-point arrays
+    Eigen::Index points = 0;       // P
+    std::vector<int32_t> offsets;  // m x m: where block (a, b) starts in K's column 3b
+  };
+  struct Rule {
+    std::vector<Element> elements;
+    std::vector<double> reference;  // per point, kPointReference doubles (see .cpp)
+    size_t points = 0;
+    int gauss = 0;                  // Gauss points per direction of its cells
+    Eigen::MatrixXd bernstein;      // 6 gauss^2 x 16: the unit cell's bicubic basis at its points
+    Eigen::MatrixXd bernstein_t;    // its transpose (the 16 values at a point contiguous)
+  };
+  struct Cell {  // (face, sub-face) and its points
+    int32_t face = 0, subface = 0;
+    std::vector<std::array<double, 2>> uvs;
+    std::vector<double> weights;
+  };
+  NonlinearShell() = default;
+
+  void build_rule(const std::vector<Cell>& cells, int gauss, int threads, Rule& rule) const;
+  static Eigen::MatrixXd element_basis(const Rule& rule, const Element& e);  // 6P x m
+  template <class Fn>
+  void for_each_element(const Rule& rule, Fn&& fn) const;
+  bool evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const;
+  void assemble_rule(const Rule& rule, const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
+
+  std::shared_ptr<const ShellModel> model_;
+  Rule fine_, coarse_;
+  int workers(int requested) const;  // threads to use for `requested` (0 = all)
+
+  std::shared_ptr<Executor> executor_;
+  int threads_ = 0;
+};
+
+}  // namespace softshell::engine::internal

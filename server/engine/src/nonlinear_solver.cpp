@@ -1,0 +1,676 @@
+// The nonlinear equilibrium solve: inexact Newton. Each Newton direction solves the exact tangent
+// (applied matrix-free) by GMRES, preconditioned by a constrained solve on a factored tangent:
+// the cached linear factor K at rest, later a tangent factored at a deformed state, refreshed
+// when the Krylov iterations stop converging fast. Load steps, chosen by the solver, when one
+// step is too large; a secant predictor between load steps and between the steps of a drag.
+// (About 670 lines: Newton, the preconditioner refresh, the load stepping and the answer's check
+// share one Run state; split, they would pass it around.)
+//
+// Why not quasi-Newton or chord steps on an older factor: in a thin shell such steps drift off
+// the Newton path (a rotation linearized on the wrong tangent stretches the surface) and then
+// need many iterations to come back; measured on the rigid-rotation and cantilever tests they
+// took 3-10 times the iterations of Newton, or did not converge.
+#include "softshell/engine/nonlinear_solver.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include "problem.h"
+#include "factor_cache_impl.h"
+#include "kkt_operator.h"
+#include "krylov.h"
+#include "load_path.h"
+#include "nonlinear_shell.h"
+#include "solver_testing.h"
+
+namespace softshell::engine {
+namespace internal {
+
+std::atomic<FastPathCorruption> g_corrupt_nonlinear_answer{nullptr};
+
+// What a solve leaves for the next one that starts from its answer (the next step of a drag).
+struct NonlinearMemory {
+  Eigen::VectorXd end;                                        // the displacement it converged to
+  std::vector<int32_t> fixed;                                 // the problem's prescribed DOFs
+  std::vector<std::vector<std::pair<int32_t, double>>> rows;  // the rows' terms
+  std::shared_ptr<const Factorization> factor;                // the last preconditioner's factor
+  std::shared_ptr<const Eigen::SparseMatrix<double>> matrix;  // and the matrix it factors
+  bool factor_is_k = false;                                   // that matrix is the model's K
+  int penalty_level = 0;                                      // constraint penalty it needed
+  // For the predictor of the next step: the last answers of this drag (oldest first, `end`
+  // last) with what each request asked (prescribed values, row values, loads).
+  std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>> history;  // (targets, displacement)
+};
+
+}  // namespace internal
+
+namespace {
+
+using internal::Factorization;
+using internal::KktOperator;
+using internal::NonlinearMemory;
+using internal::NonlinearShell;
+using internal::Problem;
+using internal::Row;
+using internal::ShellState;
+using Clock = std::chrono::steady_clock;
+
+double ms_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+std::string percent(double x) {
+  std::ostringstream s;
+  s.precision(3);
+  s << 100.0 * x << "%";
+  return s.str();
+}
+
+std::string scientific(double x) {
+  std::ostringstream s;
+  s.precision(2);
+  s << std::scientific << x;
+  return s.str();
+}
+
+constexpr int kMaxStepIterations = 30;     // Newton iterations per load step before it is split
+constexpr int kMaxKrylov = 24;             // GMRES iterations per Newton step
+constexpr double kStepTolerance = 1e-5;    // convergence of intermediate load steps
+constexpr double kMinLoadStep = 1.0 / 1024.0;
+// The first load step turns the surface by about this much (radians) in the linear estimate:
+// Newton converges from there in a few iterations, and later steps have a secant predictor.
+constexpr double kStepRotation = 0.2;
+
+// One solve: a request, its problem, the state and the current preconditioner.
+class Run {
+ public:
+  Run(std::shared_ptr<const ShellModel> model, const NonlinearShell& shell, FactorCache& cache,
+      const NonlinearOptions& options, const DeformationRequest& request, const Eigen::VectorXd* initial,
+      std::shared_ptr<const NonlinearMemory> memory);
+  NonlinearSolution run();
+  std::shared_ptr<const NonlinearMemory> memory_out() const { return memory_out_; }
+
+ private:
+  bool evaluate(const Eigen::VectorXd& u, ShellState& state) {
+    ++stats_.evaluations;
+    const auto t0 = Clock::now();
+    const bool ok = shell_.evaluate(u, state, pressure_ != 0.0);
+    stats_.evaluate_ms += ms_between(t0, Clock::now());
+    return ok;
+  }
+  // R(u, lambda): the out-of-balance force of the homotopy from the initial state (lambda = 0,
+  // where R vanishes) to the request (lambda = 1).
+  Eigen::VectorXd residual(const ShellState& s, double lambda) const {
+    Eigen::VectorXd r = lambda * problem_.load - s.internal_force;
+    if (pressure_ != 0.0) r += lambda * pressure_ * s.pressure_force;
+    if (lambda < 1.0) r += (1.0 - lambda) * r0_;
+    return r;
+  }
+  double force_scale(const ShellState& s, double lambda) const {
+    Eigen::VectorXd applied = lambda * problem_.load;
+    if (pressure_ != 0.0) applied += lambda * pressure_ * s.pressure_force;
+    if (lambda < 1.0) applied += (1.0 - lambda) * r0_;
+    return std::max({applied.norm(), s.internal_force.norm(), force_floor_ * s.max_gradient, 1e-300});
+  }
+  Eigen::VectorXd row_residual(const Eigen::VectorXd& u, double lambda) const;
+  bool rows_met(const Eigen::VectorXd& g, const Eigen::VectorXd& u) const;
+  // J v: the exact tangent of the residual's negative at the current state, on free DOFs.
+  Eigen::VectorXd tangent_times(const Eigen::VectorXd& v, double lambda) const;
+  Eigen::VectorXd precondition(const Eigen::VectorXd& r) const {
+    return kkt_->solve(r, Eigen::VectorXd::Zero(static_cast<Eigen::Index>(problem_.rows.size())));
+  }
+  bool newton_direction(const Eigen::VectorXd& r, const Eigen::VectorXd& g, double lambda, double eta,
+                        Eigen::VectorXd& p);
+  void use_linear_factor();
+  void prepare_penalty();
+  void refresh_tangent();
+  double first_step();
+  Eigen::VectorXd predicted_path(const std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>>& history) const;
+  bool solve_step(double lambda, double tolerance);
+  double check_answer(const Eigen::VectorXd& u);
+  [[noreturn]] void give_up(double lambda, const std::string& why) const;
+
+  std::shared_ptr<const ShellModel> model_;
+  const NonlinearShell& shell_;
+  FactorCache& cache_;
+  const NonlinearOptions& options_;
+  Clock::time_point start_;
+  Problem problem_;
+  double pressure_ = 0.0;
+  internal::Pins pins_;
+  std::unique_ptr<internal::Reactions> reactions_;
+  std::unique_ptr<internal::PrescribedPath> path_of_fixed_;
+  Eigen::VectorXd u0_, r0_, d0_;
+  Eigen::VectorXd targets_;  // prescribed values, row values and loads of the request
+  std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>> history_;  // of the drag this solve continues
+  Eigen::VectorXd path_;     // predicted du / dlambda (empty: none)
+  double length_ = 1.0, force_floor_ = 0.0;
+  std::shared_ptr<const NonlinearMemory> memory_in_, memory_out_;
+
+  // Current state and preconditioner.
+  Eigen::VectorXd u_;
+  ShellState state_;
+  std::unique_ptr<KktOperator> kkt_;
+  std::shared_ptr<const Factorization> factor_;
+  std::shared_ptr<const Eigen::SparseMatrix<double>> matrix_;
+  bool factor_is_k_ = false;
+  bool fresh_ = false;  // the factor was made at the current state
+  std::vector<std::pair<int64_t, double>> penalty_;  // value index in the tangent, coefficient
+  double penalty_unit_ = 0.0;
+  int penalty_level_ = 0;
+  double refresh_ms_ = 0.0, krylov_ms_ = 0.0;  // cost of the last refresh, of one Krylov iteration
+  int last_krylov_ = 0;
+  double last_residual_ = 0.0;
+  NonlinearStats stats_;
+};
+
+Run::Run(std::shared_ptr<const ShellModel> model, const NonlinearShell& shell, FactorCache& cache,
+         const NonlinearOptions& options, const DeformationRequest& request, const Eigen::VectorXd* initial,
+         std::shared_ptr<const NonlinearMemory> memory)
+    : model_(std::move(model)), shell_(shell), cache_(cache), options_(options), start_(Clock::now()),
+      memory_in_(std::move(memory)) {
+  const ShellModel& m = *model_;
+  DeformationRequest dead = request;
+  dead.pressure = 0.0;  // follows the deformed surface: handled here, not in the dead load
+  problem_ = internal::build_problem(m, dead);
+  internal::check_determined(m, problem_);
+  pressure_ = request.pressure;
+  pins_ = internal::choose_pins(m, problem_.fixed);
+  reactions_ = std::make_unique<internal::Reactions>(problem_);
+  const auto ndof = m.num_dofs();
+  u0_ = Eigen::VectorXd::Zero(ndof);
+  if (initial) {
+    if (initial->size() != ndof) {
+      fail(ErrorCode::kInvalidArgument, "the initial displacement has " + std::to_string(initial->size()) +
+                                            " entries; the model has " + std::to_string(ndof) + " DOFs");
+    }
+    if (!initial->allFinite()) fail(ErrorCode::kInvalidArgument, "the initial displacement has a NaN or infinite entry");
+    u0_ = *initial;
+  }
+  length_ = std::max(m.mesh().bounding_diagonal(), 1e-300);
+  // Forces below floor * (largest displacement gradient) are round-off of the internal forces:
+  // their absolute accuracy is about eps E t h per DOF times that gradient (measured: 1.3 eps
+  // E t h sqrt(3n) for a rigid half turn), so 1e-6 leaves a margin of 30 over the tolerance.
+  const Material& mat = m.material();
+  const double h = std::sqrt(m.area() / std::max(1, m.mesh().num_faces()));
+  force_floor_ = 1e-6 * mat.youngs_modulus * mat.thickness * h * std::sqrt(static_cast<double>(ndof));
+}
+
+Eigen::VectorXd Run::row_residual(const Eigen::VectorXd& u, double lambda) const {
+  Eigen::VectorXd g(static_cast<Eigen::Index>(problem_.rows.size()));
+  for (size_t k = 0; k < problem_.rows.size(); ++k) {
+    double lhs = 0.0;
+    for (const auto& [dof, coef] : problem_.rows[k].terms) lhs += coef * u[dof];
+    const double start = d0_[static_cast<Eigen::Index>(k)];
+    g[static_cast<Eigen::Index>(k)] = start + lambda * (problem_.rows[k].rhs - start) - lhs;
+  }
+  return g;
+}
+
+bool Run::rows_met(const Eigen::VectorXd& g, const Eigen::VectorXd& u) const {
+  const double scale = std::max(u.cwiseAbs().maxCoeff(), 1e-9 * length_);
+  for (size_t k = 0; k < problem_.rows.size(); ++k) {
+    if (std::abs(g[static_cast<Eigen::Index>(k)]) > 1e-10 * problem_.rows[k].scale * scale) return false;
+  }
+  return true;
+}
+
+Eigen::VectorXd Run::tangent_times(const Eigen::VectorXd& v, double lambda) const {
+  Eigen::MatrixXd out;
+  shell_.tangent_product(state_, lambda * pressure_, v, out);
+  Eigen::VectorXd jv = out.col(0);
+  for (int32_t dof : problem_.fixed) jv[dof] = 0.0;
+  return jv;
+}
+
+void Run::use_linear_factor() {
+  const ShellModel& m = *model_;
+  FactorCache::Impl& cache = internal::FactorCacheAccess::impl(cache_);
+  bool hit = true;
+  std::shared_ptr<const Factorization> factor = cache.find_subset(m.id(), problem_.fixed, 96);
+  if (!factor) {
+    factor = cache.get(m.id(), problem_.fixed,
+                       [&] { return std::make_shared<const Factorization>(m, problem_.fixed, pins_.dofs, pins_.motions); }, hit);
+  }
+  if (!hit) ++stats_.factorizations;
+  factor_ = factor;
+  matrix_ = std::shared_ptr<const Eigen::SparseMatrix<double>>(model_, &m.stiffness());
+  factor_is_k_ = true;
+  kkt_ = std::make_unique<KktOperator>(factor_, matrix_, problem_, true);
+}
+
+// Where the rows' normal matrices C^T C fall in the tangent's value array: adding rho C^T C to the
+// tangent leaves the constrained solve unchanged (C z = g) and makes the matrix positive definite
+// when only the constraints hold the shell stable (a grab holding a part that would otherwise
+// buckle). Rows coupling control points K does not couple are left out.
+void Run::prepare_penalty() {
+  const Eigen::SparseMatrix<double>& k = model_->stiffness();
+  auto position = [&](int32_t row, int32_t col) -> int64_t {
+    const int* begin = k.innerIndexPtr() + k.outerIndexPtr()[col];
+    const int* end = k.innerIndexPtr() + k.outerIndexPtr()[col + 1];
+    const int* it = std::lower_bound(begin, end, row);
+    return it != end && *it == row ? it - k.innerIndexPtr() : -1;
+  };
+  for (const Row& row : problem_.rows) {
+    std::vector<std::pair<int64_t, double>> entries;
+    bool fits = true;
+    for (size_t i = 0; i < row.terms.size() && fits; ++i) {
+      for (size_t j = 0; j < row.terms.size() && fits; ++j) {
+        const int64_t at = position(row.terms[i].first, row.terms[j].first);
+        fits = at >= 0;
+        entries.push_back({at, row.terms[i].second * row.terms[j].second / (row.scale * row.scale)});
+      }
+    }
+    if (fits) penalty_.insert(penalty_.end(), entries.begin(), entries.end());
+  }
+  double diagonal = 0.0;
+  for (Eigen::Index d = 0; d < k.rows(); ++d) {
+    if (!problem_.is_fixed[static_cast<size_t>(d)]) diagonal = std::max(diagonal, k.coeff(d, d));
+  }
+  penalty_unit_ = diagonal;
+}
+
+// A preconditioner made at the current state: the tangent (integrated with the coarse rule if the
+// shell has one), factored; if it is not positive definite, first with the constraint penalty
+// (from the level that worked last), then shifted toward K (an unstable state on the way, or past
+// a buckling load): still a preconditioner, the Newton directions use the true tangent.
+void Run::refresh_tangent() {
+  const auto t0 = Clock::now();
+  auto matrix = std::make_shared<Eigen::SparseMatrix<double>>();
+  if (!shell_.assemble_jacobian(state_, pressure_, *matrix)) shell_.assemble_tangent(state_, pressure_, *matrix);
+  std::shared_ptr<const Factorization> factor;
+  const Factorization* pattern = factor_is_k_ ? nullptr : factor_.get();
+  auto try_factor = [&] {
+    ++stats_.factorizations;
+    try {
+      factor = std::make_shared<const Factorization>(*matrix, problem_.fixed, pins_.dofs, pattern);
+      return true;
+    } catch (const internal::FactorizationFailed&) {
+      return false;
+    }
+  };
+  static constexpr double kLevels[] = {0.0, 1e-4, 1e-2, 1.0};
+  double added = 0.0;
+  for (int level = penalty_level_; level < 4 && !factor; ++level) {
+    if (level > 0 && penalty_.empty()) break;
+    const double rho = kLevels[level] * penalty_unit_;
+    for (const auto& [at, coef] : penalty_) matrix->valuePtr()[at] += (rho - added) * coef;
+    added = rho;
+    if (try_factor()) penalty_level_ = level;
+  }
+  for (double shift : {1e-4, 1e-2, 1.0}) {
+    if (factor) break;
+    *matrix += shift * model_->stiffness();
+    try_factor();
+  }
+  if (factor) {
+    factor_ = factor;
+    matrix_ = matrix;
+    factor_is_k_ = false;
+    kkt_ = std::make_unique<KktOperator>(factor_, matrix_, problem_, false);
+  } else {
+    use_linear_factor();
+  }
+  fresh_ = true;
+  refresh_ms_ = ms_between(t0, Clock::now());
+  stats_.tangent_ms += refresh_ms_;
+}
+
+// The Newton direction p: J p = r on the DOFs the rows leave free and C p = g. The particular part
+// that meets the rows comes from the preconditioner's constrained solve; the rest from GMRES to a
+// relative accuracy eta. If GMRES is slow, the preconditioner is refreshed at this state first.
+bool Run::newton_direction(const Eigen::VectorXd& r, const Eigen::VectorXd& g, double lambda, double eta,
+                           Eigen::VectorXd& p) {
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    // Refresh when the last solve's Krylov iterations cost more than a new factor would.
+    const double refresh_cost = refresh_ms_ > 0.0 ? refresh_ms_ : 2.0 * krylov_ms_;  // a guess until measured
+    if (!fresh_ && last_krylov_ > 3 && last_krylov_ * krylov_ms_ > refresh_cost) refresh_tangent();
+    const Eigen::VectorXd pc = g.isZero(0.0) ? Eigen::VectorXd::Zero(r.size())
+                                             : kkt_->solve(Eigen::VectorXd::Zero(r.size()), g);
+    Eigen::VectorXd rhs = r;
+    if (!pc.isZero(0.0)) rhs -= tangent_times(pc, lambda);
+    const auto t0 = Clock::now();
+    const internal::KrylovResult k = internal::gmres(
+        [&](const Eigen::VectorXd& v) { return precondition(tangent_times(v, lambda)); }, precondition(rhs), eta,
+        fresh_ ? 2 * kMaxKrylov : kMaxKrylov);
+    stats_.krylov_iterations += k.iterations;
+    last_krylov_ = k.iterations;
+    const double ms = ms_between(t0, Clock::now());
+    stats_.krylov_ms += ms;
+    if (k.iterations > 0) krylov_ms_ = ms / k.iterations;
+    if (k.converged || (fresh_ && k.relative_residual < 0.5)) {
+      p = pc + k.x;
+      return true;
+    }
+    if (fresh_) return false;
+    refresh_tangent();
+  }
+  return false;
+}
+
+// The predicted change of the answer from the last one of a drag to this request's, per unit
+// load step: the answers so far as functions of the position along the drag, extrapolated by
+// the polynomial through the last three (quadratic) or two (secant), when the requests lie on a
+// line in the space of targets (a grab moved steadily); empty otherwise.
+Eigen::VectorXd Run::predicted_path(const std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>>& history) const {
+  const Eigen::VectorXd& last = history.back().first;
+  const Eigen::VectorXd ahead = targets_ - last;
+  const double length = ahead.norm();
+  if (!(length > 0.0) || history.size() < 2) return {};
+  const Eigen::VectorXd direction = ahead / length;
+  std::vector<double> position;  // along the drag, this request at `length`, the last at 0
+  for (const auto& [t, u] : history) {
+    const Eigen::VectorXd offset = t - last;
+    const double along = offset.dot(direction);
+    if ((offset - along * direction).norm() > 0.1 * std::max(std::abs(along), 1e-300 * length)) return {};
+    position.push_back(along);
+  }
+  const size_t n = std::min<size_t>(3, history.size()), first = history.size() - n;
+  // Lagrange weights at `length` through the last n points.
+  Eigen::VectorXd predicted = Eigen::VectorXd::Zero(history.back().second.size());
+  for (size_t i = first; i < history.size(); ++i) {
+    double w = 1.0;
+    for (size_t k = first; k < history.size(); ++k) {
+      if (k == i) continue;
+      const double gap = position[i] - position[k];
+      if (!(std::abs(gap) > 1e-12 * length)) return {};
+      w *= (length - position[k]) / gap;
+    }
+    predicted += w * history[i].second;
+  }
+  return predicted - history.back().second;
+}
+
+// The linear estimate of the whole request's displacement increment (one constrained solve on
+// the current factor) and the first load step from the largest rotation it implies.
+double Run::first_step() {
+  const ShellModel& m = *model_;
+  Eigen::VectorXd jump = Eigen::VectorXd::Zero(m.num_dofs());
+  for (int32_t dof : problem_.fixed) jump[dof] = problem_.fixed_value[dof] - u0_[dof];
+  const Eigen::VectorXd r = residual(state_, 1.0) - *matrix_ * jump;
+  const Eigen::VectorXd du = kkt_->solve(r, row_residual(u0_, 1.0)) + jump;
+  const double rotation = std::max(path_of_fixed_->largest_turn(), internal::largest_edge_rotation(m.mesh(), du));
+  if (!std::isfinite(rotation)) return kMinLoadStep;
+  return rotation > kStepRotation ? std::max(kMinLoadStep, kStepRotation / rotation) : 1.0;
+}
+
+bool Run::solve_step(double lambda, double tolerance) {
+  // Prescribed DOFs along their path; the state is already at u unless they moved (a drag
+  // changes only rows).
+  path_of_fixed_->apply(lambda, u_);
+  if (state_.displacement.size() != u_.size() || state_.displacement != u_) {
+    if (!evaluate(u_, state_)) return false;
+    fresh_ = false;
+  }
+  double first_out = 0.0, previous = 1.0, eta_cap = 1e-3;
+  for (int it = 0;; ++it) {
+    const Eigen::VectorXd r = residual(state_, lambda);
+    const Eigen::VectorXd g = row_residual(u_, lambda);
+    const double out = reactions_->out_of_balance(r).norm(), scale = force_scale(state_, lambda);
+    const bool rows_ok = rows_met(g, u_);
+    last_residual_ = out / scale;
+    if (last_residual_ <= tolerance && rows_ok) return true;
+    if (it == 0) first_out = out;
+    // A step that has not gained two orders of magnitude in 20 iterations is too large.
+    if (it >= kMaxStepIterations || stats_.iterations >= options_.max_iterations ||
+        (it >= 20 && out > 1e-2 * first_out)) {
+      return false;
+    }
+    ++stats_.iterations;
+    // Forcing term: loose far from the answer, tight enough near it that the step lands below
+    // the tolerance (Eisenstat-Walker-like, from the relative residual).
+    const double res = last_residual_;
+    // Thin shells need accurate Newton directions (measured: a flat plate turned rigidly needs
+    // eta <= 1e-6, curved shells 1e-3): start at 1e-3 and tighten when Newton is slow.
+    if (it > 0 && res > 0.2 * previous) eta_cap = std::max(1e-8, 0.01 * eta_cap);
+    const double eta = std::clamp(std::max(std::min(res, res / previous), 0.3 * tolerance / res), 1e-9, eta_cap);
+    previous = res;
+    Eigen::VectorXd p;
+    if (!newton_direction(r, rows_ok ? Eigen::VectorXd::Zero(g.size()) : g, lambda, eta, p)) return false;
+    // The Newton step, whole: in a thin shell it often overshoots into large membrane forces
+    // that the next step removes, so neither the force nor the energy is a useful merit. It is
+    // shortened only if it folds the surface or multiplies the force a thousandfold.
+    ShellState trial;
+    bool accepted = false;
+    for (double alpha = 1.0; alpha > 1e-3 && !accepted; alpha *= 0.25) {
+      const Eigen::VectorXd ut = u_ + alpha * p;
+      if (!evaluate(ut, trial)) continue;
+      const double out_t = reactions_->out_of_balance(residual(trial, lambda)).norm();
+      accepted = out_t < 1e3 * std::max(out, 1e-6 * scale) || !rows_ok;
+      if (accepted) u_ = ut;
+    }
+    if (!accepted) return false;
+    state_ = std::move(trial);
+    fresh_ = false;
+  }
+}
+
+// The safety net, as on the linear solver's answers: before an answer leaves, the state it
+// describes is checked against the request on its own terms (not the iteration's measure alone):
+// finite, the prescribed DOFs as asked, the out-of-balance force of the nonlinear equilibrium
+// (after the constraint reactions that best explain it) within the tolerance of the forces
+// acting, and every constraint row within the allowance the linear check gives it (a share of the
+// displacements, the geometry's round-off and the round-off of its terms). Returns the largest
+// ratio residual / allowance (<= 1); refuses the answer otherwise.
+double Run::check_answer(const Eigen::VectorXd& u) {
+  // The same allowances as the linear check (solver.cpp); the equilibrium's is a margin over the
+  // Newton tolerance, so that only a state that is not the converged one fails it.
+  constexpr double kConstraint = 1e-9, kGeometry = 1e-13, kRoundOff = 1e-12, kEquilibriumMargin = 10.0;
+  const std::string refused = "the nonlinear solve produced no accurate answer: ";
+  if (!u.allFinite()) fail(ErrorCode::kUnprocessable, refused + "the displacements are not finite");
+  for (int32_t dof : problem_.fixed) {
+    if (u[dof] != problem_.fixed_value[dof]) {
+      fail(ErrorCode::kUnprocessable, refused + "control point " + std::to_string(dof / 3) + " (" +
+                                          internal::axis_name(dof % 3) + ") is not where its vertex constraint puts it");
+    }
+  }
+  ShellState checked;
+  const ShellState* s = &state_;
+  if (state_.displacement.size() != u.size() || state_.displacement != u) {
+    if (!evaluate(u, checked)) fail(ErrorCode::kUnprocessable, refused + "the answer folds the surface onto itself");
+    s = &checked;
+  }
+  double worst = 0.0;
+  Vec3 lo, hi;
+  model_->mesh().bounding_box(lo, hi);
+  const double size = std::max({(hi - lo).norm(), lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff()});
+  double displacement_scale = u.cwiseAbs().maxCoeff();
+  for (const Row& row : problem_.rows) displacement_scale = std::max(displacement_scale, std::abs(row.rhs) / row.scale);
+  for (const Row& row : problem_.rows) {
+    double lhs = 0.0, terms = std::abs(row.rhs);
+    for (const auto& [dof, coef] : row.terms) {
+      lhs += coef * u[dof];
+      terms += std::abs(coef * u[dof]);
+    }
+    const double residual = std::abs(lhs - row.rhs);
+    const double allowed = row.scale * (kConstraint * displacement_scale + kGeometry * size) + kRoundOff * terms;
+    worst = std::max(worst, residual / allowed);
+    if (!(residual <= allowed)) {
+      fail(ErrorCode::kUnprocessable, refused + row.source + " is off by " + internal::format_number(residual) +
+                                          " (displacements of " + internal::format_number(displacement_scale) +
+                                          ")");
+    }
+  }
+  const double equilibrium = reactions_->out_of_balance(residual(*s, 1.0)).norm() / force_scale(*s, 1.0);
+  worst = std::max(worst, equilibrium / (kEquilibriumMargin * options_.tolerance));
+  if (!(worst <= 1.0)) {
+    fail(ErrorCode::kUnprocessable, refused + "the out-of-balance force is " + scientific(equilibrium) +
+                                        " of the forces acting (allowed " +
+                                        scientific(kEquilibriumMargin * options_.tolerance) + ")");
+  }
+  return worst;
+}
+
+void Run::give_up(double lambda, const std::string& why) const {
+  std::string message = "the nonlinear model could not bring the shell to equilibrium: ";
+  message += lambda > 0.0 ? "it reached " + percent(lambda) + " of the requested loads and displacements (" + why + ")"
+                          : why;
+  message += ". The shell may snap through or buckle under this request, or the load may exceed what it carries. "
+             "Try a smaller step (drag in smaller increments, starting each from the previous answer), a smaller load, "
+             "more supports, or the linear model";
+  fail(ErrorCode::kUnprocessable, message);
+}
+
+NonlinearSolution Run::run() {
+  const ShellModel& m = *model_;
+  const auto ndof = m.num_dofs();
+  u_ = u0_;
+  if (!evaluate(u_, state_)) {
+    fail(ErrorCode::kInvalidArgument, "the initial displacement folds the surface onto itself (a zero or inverted area element)");
+  }
+  r0_ = state_.internal_force;
+  path_of_fixed_ = std::make_unique<internal::PrescribedPath>(m.mesh(), problem_, u0_);
+  d0_.resize(static_cast<Eigen::Index>(problem_.rows.size()));
+  for (size_t k = 0; k < problem_.rows.size(); ++k) {
+    double lhs = 0.0;
+    for (const auto& [dof, coef] : problem_.rows[k].terms) lhs += coef * u0_[dof];
+    d0_[static_cast<Eigen::Index>(k)] = lhs;
+  }
+  prepare_penalty();
+
+  // Preconditioner: the last one of a solve with the same prescribed DOFs (a drag), unless this
+  // solve starts at rest, where K is the tangent.
+  std::vector<std::vector<std::pair<int32_t, double>>> row_terms;
+  for (const Row& row : problem_.rows) row_terms.push_back(row.terms);
+  const NonlinearMemory* mem = memory_in_.get();
+  const bool at_rest = u0_.isZero(0.0);
+  const bool continues = mem && mem->end.size() == ndof && mem->end == u0_;
+  if (mem && !at_rest && mem->fixed == problem_.fixed && mem->factor && mem->factor->pinned() == pins_.dofs &&
+      !mem->factor_is_k) {
+    factor_ = mem->factor;
+    matrix_ = mem->matrix;
+    kkt_ = std::make_unique<KktOperator>(factor_, matrix_, problem_, false);
+    if (mem->rows == row_terms) penalty_level_ = mem->penalty_level;
+  } else {
+    use_linear_factor();
+    fresh_ = at_rest;
+  }
+
+  // The request's targets; a drag continuing the last solve in the same direction gets a secant
+  // predictor (the last step's change, scaled to this one).
+  const auto nf = static_cast<Eigen::Index>(problem_.fixed.size()), nr = static_cast<Eigen::Index>(problem_.rows.size());
+  targets_.resize(nf + nr + ndof + 1);
+  for (Eigen::Index k = 0; k < nf; ++k) targets_[k] = problem_.fixed_value[problem_.fixed[static_cast<size_t>(k)]];
+  for (Eigen::Index k = 0; k < nr; ++k) targets_[nf + k] = problem_.rows[static_cast<size_t>(k)].rhs;
+  targets_.segment(nf + nr, ndof) = problem_.load;
+  targets_[nf + nr + ndof] = pressure_;
+  const bool same_drag = continues && mem->rows == row_terms && mem->fixed == problem_.fixed &&
+                         !mem->history.empty() && mem->history.back().first.size() == targets_.size();
+  if (same_drag) path_ = predicted_path(mem->history);
+  history_ = same_drag ? mem->history : decltype(history_){};
+  if (!same_drag && at_rest) history_.push_back({Eigen::VectorXd::Zero(targets_.size()), u0_});  // rest answers the empty request
+
+  double lambda = 0.0, step = path_.size() == ndof ? 1.0 : first_step();
+  std::vector<std::pair<double, Eigen::VectorXd>> converged{{0.0, u_}};
+  while (lambda < 1.0) {
+    const double target = std::min(1.0, lambda + step);
+    const Eigen::VectorXd u_start = u_;
+    ++stats_.load_steps;
+    if (converged.size() >= 2) {  // secant through the last two converged load steps
+      const auto& [l1, u1] = converged[converged.size() - 2];
+      const auto& [l2, u2] = converged.back();
+      path_ = (u2 - u1) / (l2 - l1);
+    }
+    if (path_.size() == ndof) u_ = u_start + (target - lambda) * path_;
+    if (solve_step(target, target < 1.0 ? std::max(kStepTolerance, options_.tolerance) : options_.tolerance)) {
+      lambda = target;
+      step = std::min(1.0, 2.0 * step);
+      converged.push_back({lambda, u_});
+      continue;
+    }
+    u_ = u_start;
+    step *= 0.5;
+    if (stats_.iterations >= options_.max_iterations) {
+      give_up(lambda, "the iteration limit of " + std::to_string(options_.max_iterations) + " was reached; residual " +
+                          scientific(last_residual_));
+    }
+    if (step < kMinLoadStep || stats_.load_steps >= options_.max_load_steps) {
+      give_up(lambda, "it did not converge in steps of " + percent(step * 2.0) + " of the request; residual " +
+                          scientific(last_residual_));
+    }
+    if (!evaluate(u_, state_)) give_up(lambda, "internal error: a converged state became invalid");
+    fresh_ = false;
+  }
+  NonlinearSolution solution;
+  solution.displacement = u_;
+  for (int32_t dof : problem_.fixed) solution.displacement[dof] = problem_.fixed_value[dof];
+  if (auto corrupt = internal::g_corrupt_nonlinear_answer.load()) corrupt(solution.displacement);
+  const double check_ratio = check_answer(solution.displacement);
+  solution.stats = stats_;
+  solution.stats.check_ratio = check_ratio;
+  solution.stats.residual = last_residual_;
+  solution.stats.strain_energy = state_.energy;
+  solution.stats.solve_ms = ms_between(start_, Clock::now());
+
+  auto out = std::make_shared<NonlinearMemory>();
+  out->end = solution.displacement;
+  out->fixed = problem_.fixed;
+  out->rows = std::move(row_terms);
+  out->factor = factor_;
+  out->matrix = matrix_;
+  out->factor_is_k = factor_is_k_;
+  out->penalty_level = penalty_level_;
+  out->history = std::move(history_);
+  out->history.push_back({targets_, solution.displacement});
+  if (out->history.size() > 3) out->history.erase(out->history.begin());
+  memory_out_ = std::move(out);
+  return solution;
+}
+
+}  // namespace
+
+NonlinearSolver::NonlinearSolver(std::shared_ptr<const ShellModel> model, std::shared_ptr<FactorCache> cache,
+                                 NonlinearOptions options)
+    : model_(std::move(model)), cache_(std::move(cache)), options_(options) {
+  if (!model_) fail(ErrorCode::kInvalidArgument, "NonlinearSolver needs a model");
+  if (!cache_) cache_ = std::make_shared<FactorCache>();
+  if (!(options_.tolerance > 0.0) || options_.tolerance >= 1.0 || options_.max_iterations < 1 ||
+      options_.max_load_steps < 1 || options_.tangent_gauss_points < 0 || options_.tangent_gauss_points > 10) {
+    fail(ErrorCode::kInvalidArgument,
+         "nonlinear options: tolerance must be in (0, 1), max_iterations and max_load_steps >= 1, "
+         "tangent_gauss_points 0..10");
+  }
+}
+
+NonlinearSolver::~NonlinearSolver() = default;
+
+std::shared_ptr<const internal::NonlinearShell> NonlinearSolver::shell() const {
+  std::lock_guard lock(mutex_);
+  if (!shell_) shell_ = internal::NonlinearShell::build(model_, options_.threads, options_.tangent_gauss_points, options_.executor);
+  return shell_;
+}
+
+Result<NonlinearSolution> NonlinearSolver::solve(const DeformationRequest& request) const {
+  return solve_from(request, nullptr);
+}
+
+Result<NonlinearSolution> NonlinearSolver::solve(const DeformationRequest& request, const Eigen::VectorXd& initial) const {
+  return solve_from(request, &initial);
+}
+
+Result<NonlinearSolution> NonlinearSolver::solve_from(const DeformationRequest& request,
+                                                      const Eigen::VectorXd* initial) const {
+  try {
+    auto sh = shell();
+    std::shared_ptr<const internal::NonlinearMemory> memory;
+    {
+      std::lock_guard lock(mutex_);
+      memory = memory_;
+    }
+    Run run(model_, *sh, *cache_, options_, request, initial, memory);
+    NonlinearSolution solution = run.run();
+    std::lock_guard lock(mutex_);
+    memory_ = run.memory_out();
+    return solution;
+  } catch (const Exception& e) {
+    return e.error();
+  } catch (const std::bad_alloc&) {
+    return Error{ErrorCode::kResourceExhausted, "out of memory in the nonlinear solve"};
+  } catch (const std::exception& e) {
+    return Error{ErrorCode::kInternal, std::string("internal error: ") + e.what()};
+  }
+}
+
+}  // namespace softshell::engine

@@ -1,0 +1,209 @@
+#pragma once
+// Service::Impl and the per-geometry Entry, shared by the service's source files (private):
+// service.cpp (geometries, deformations, results), holds.cpp (holds and their solver loop),
+// subscriptions.cpp and service_metrics.cpp.
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstring>
+#include <deque>
+#include <future>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <shared_mutex>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "hold_state.h"
+#include "lease_timer.h"
+#include "memory_budget.h"
+#include "softshell/service/service.h"
+#include "task_pool.h"
+
+namespace softshell::service {
+namespace internal {
+
+using Clock = std::chrono::steady_clock;
+
+struct GeomIdHash {
+  size_t operator()(const GeomId& id) const noexcept {
+    size_t h = 0;
+    std::memcpy(&h, id.bytes.data(), sizeof h);  // the id is a cryptographic hash already
+    return h;
+  }
+};
+
+std::string megabytes(size_t bytes);
+size_t request_bytes(const DeformationRequest& r);
+Error not_found(const GeomId& id);
+Error shutdown_error();
+Error no_room(const MemoryBudget& budget, size_t bytes, const std::string& what);
+
+using Pending = std::pair<DeformationRequest, Service::DeformCallback>;
+using HoldPromise = std::shared_ptr<std::promise<Result<HoldOutcome>>>;
+
+// ---------------------------------------------------------------------------------------------
+// Holds of one geometry (guarded by Entry::mu).
+
+// A change waiting for the hold-state solve: a new version of a hold, or a release (a DELETE or
+// a lapsed lease).
+struct HoldChange {
+  uint64_t seq = 0;            // per geometry, in arrival order
+  std::string hold_id;
+  uint64_t instance = 0;       // which incarnation of the hold (a released id may be used again)
+  HoldVersionPtr version;      // null for a release
+};
+
+// A live hold as clients see it (GET .../holds).
+struct LiveHold {
+  uint64_t instance = 0;
+  HoldVersionPtr accepted;     // in force; null while its first version waits for the solve
+  HoldVersionPtr newest;       // `accepted`, or the version of a change waiting for the solve
+  uint64_t newest_seq = 0;     // that change (0 when newest == accepted)
+  uint64_t next_version = 1;
+  Clock::time_point expires{};
+  uint64_t lease = 0;          // LeaseTimer id
+};
+
+struct HoldTable {
+  // Released holds' next versions, so that an id used again continues its count (the versions
+  // in results and events only grow per hold id). Bounded: beyond kMaxRetired entries the first
+  // by id is forgotten.
+  static constexpr size_t kMaxRetired = 4096;
+  std::map<std::string, uint64_t, std::less<>> retired;
+  void retire(const std::string& id, const LiveHold& h) {
+    retired[id] = h.next_version;
+    if (retired.size() > kMaxRetired) retired.erase(retired.begin());
+  }
+
+  std::map<std::string, LiveHold, std::less<>> live;
+  HoldMap committed;                 // what the last processed changes left: the solver's view
+  std::deque<HoldChange> pending;    // not yet taken by a solve, in arrival order
+  std::map<uint64_t, std::vector<HoldPromise>> waiters;  // by change seq (pending or in the solve)
+  uint64_t next_seq = 1;
+  uint64_t next_instance = 1;
+  bool solving = false;              // a solve task is queued or running
+  bool unsolvable = false;           // `committed` could not be solved
+  std::string message;               // why
+  ResultPtr latest;                  // newest stored result of the hold state
+  size_t bytes = 0;                  // reserved for versions held here (live and pending)
+};
+
+// ---------------------------------------------------------------------------------------------
+
+// A registered result listener; `mu` serializes its calls with its removal.
+struct ListenerSlot {
+  std::mutex mu;
+  ResultListener fn;
+  bool active = true;
+};
+
+// One geometry and everything the service keeps for it.
+struct Entry {
+  GeomId id;
+  std::shared_ptr<const Geometry> geometry;
+
+  mutable std::mutex mu;  // guards everything below but `progress`, the evaluator and `notify_mu`
+  mutable std::condition_variable cv;  // notified when a result is stored or the status changes
+  GeometryStatus status = GeometryStatus::kPrecomputing;
+  std::string error;
+  size_t reserved_bytes = 0;  // mesh + model (estimate until built)
+  std::shared_ptr<const engine::ShellModel> model;
+  std::shared_ptr<const engine::Solver> solver;
+  // The nonlinear model's solver (its quadrature basis is built by its first solve).
+  std::shared_ptr<const engine::NonlinearSolver> nonlinear;
+  std::vector<ResultPtr> results;  // results[k] has res_id k + 1
+  std::vector<Pending> pending;    // requests waiting for the precomputation
+  HoldTable holds;
+  std::vector<std::shared_ptr<ListenerSlot>> listeners;
+  size_t notified = 0;             // results handed to listeners (under notify_mu)
+
+  std::mutex notify_mu;            // one thread at a time hands results to listeners, in id order
+
+  std::atomic<double> progress{0.0};
+
+  mutable std::mutex evaluator_mu;  // guards the lazily created evaluator
+  mutable std::optional<LimitEvaluator> evaluator;
+  mutable std::optional<Error> evaluator_error;
+
+  GeometryInfo info_locked() const;
+};
+
+}  // namespace internal
+
+struct Service::Impl {
+  using Entry = internal::Entry;
+  using Clock = internal::Clock;
+
+  explicit Impl(const ServiceOptions& o);
+
+  std::shared_ptr<Entry> find(const GeomId& id) const;
+  std::vector<std::shared_ptr<Entry>> all() const;
+  // The limit evaluator of a geometry: the model's once built, before that one made on demand.
+  Result<LimitEvaluator> evaluator(const Entry& e) const;
+  // The one validation of a request (validate_request) for this geometry, deformations and holds
+  // alike: indices against its control points, surface points against its limit surface (checked
+  // now, not after the precomputation). kInvalidArgument naming the first bad element.
+  Result<void> validate(const Entry& e, const DeformationRequest& request) const;
+
+  void start_precompute(const std::shared_ptr<Entry>& e);
+  void finish_precompute(const std::shared_ptr<Entry>& e, Result<std::shared_ptr<const engine::ShellModel>> model,
+                         double seconds);
+  void submit_solve(const std::shared_ptr<Entry>& e, std::shared_ptr<const engine::Solver> solver,
+                    DeformationRequest request, DeformCallback done);
+
+  // Stores a result under the next id (budget permitting) and hands it to the listeners.
+  // `locked` runs under the geometry's lock right after the result is stored (for bookkeeping
+  // that must be visible together with it). kResourceExhausted if it does not fit.
+  Result<ResultPtr> store(Entry& e, std::shared_ptr<StoredResult> stored, const std::function<void()>& locked = {});
+  // Hands every stored result not yet handed out to the listeners, in id order.
+  void notify(Entry& e);
+
+  // --- holds (holds.cpp) ---
+  // True if the geometry's hold-state solve should be queued now: changes wait and no solve is
+  // queued or running (marks it queued; caller holds e.mu and calls launch_hold_solve after
+  // unlocking, because a pool that shuts down runs tasks on the calling thread).
+  bool claim_hold_solve_locked(Entry& e);
+  void launch_hold_solve(const std::shared_ptr<Entry>& e);
+  void run_hold_solve(const std::shared_ptr<Entry>& e);
+  // Ends a hold whose lease lapsed (from the lease timer).
+  void expire_hold(const std::weak_ptr<Entry>& weak, const std::string& hold_id, uint64_t lease);
+  // Answers every hold change that waits (shutdown; a failed precomputation, which also drops
+  // the changes, since none can ever be solved).
+  void fail_hold_waiters(Entry& e, const Error& error, bool drop_changes);
+  void schedule_lease_locked(const std::shared_ptr<Entry>& e, const std::string& hold_id, internal::LiveHold& h,
+                             std::chrono::milliseconds ttl);
+
+  ServiceOptions options;
+  std::shared_ptr<engine::FactorCache> cache;
+  internal::MemoryBudget budget;
+
+  mutable std::shared_mutex registry_mu;
+  std::unordered_map<GeomId, std::shared_ptr<Entry>, internal::GeomIdHash> by_id;
+  std::vector<std::shared_ptr<Entry>> in_order;
+
+  std::atomic<bool> stopping{false};
+  std::mutex shutdown_mu;
+  std::atomic<int> precomputing_now{0};
+  mutable std::atomic<size_t> waiters{0};
+  std::atomic<uint64_t> total_results{0}, solves_ok{0}, solves_failed{0}, refused_no_memory{0};
+  Histogram solve_hist, precompute_hist;
+
+  // Holds
+  std::atomic<uint64_t> next_lease{1};
+  std::atomic<uint64_t> hold_solves{0}, hold_changes_solved{0}, hold_renewals{0}, hold_conflicts{0},
+      hold_rejections{0}, leases_expired{0}, hold_changes_superseded{0};
+  std::atomic<size_t> followers{0};
+  Histogram hold_solve_hist;
+
+  // Declared last: destroyed (joined) first, while everything their tasks use still exists.
+  internal::LeaseTimer leases;
+  internal::TaskPool precompute_pool;
+  internal::TaskPool solve_pool;
+};
+
+}  // namespace softshell::service

@@ -1,0 +1,144 @@
+// The nonlinear Kirchhoff-Love kernel: its first-order term is the linear model's K, its tangent
+// is the derivative of its internal forces, and rigid motions of any size leave it unstrained.
+#include "nonlinear_shell.h"
+
+#include <cmath>
+#include <random>
+
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include "test_meshes.h"
+
+namespace softshell::engine::internal {
+namespace {
+
+Material material() { return Material{2.0e9, 0.35, 0.002, 1000.0}; }
+
+struct Case {
+  std::string name;
+  ControlMesh mesh;
+};
+
+// A flat plate, a doubly curved open shell and meshes with extraordinary vertices.
+std::vector<Case> cases() {
+  std::vector<Case> out;
+  out.push_back({"plate", test::make_grid(6, 4, 0.6, 0.4)});
+  out.push_back({"dome", test::make_grid(6, 6, 1.0, 1.0, [](double x, double y) {
+                   return 0.3 * std::sin(M_PI * x) * std::sin(M_PI * y);
+                 })});
+  for (const char* name : {"catmark_gregory_test5.obj", "catmark_nonquads.obj"}) {
+    out.push_back({name, test::load_asset_mesh(name)});
+  }
+  return out;
+}
+
+Eigen::VectorXd random_vector(Eigen::Index n, double scale, std::mt19937& rng) {
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  Eigen::VectorXd v(n);
+  for (Eigen::Index i = 0; i < n; ++i) v[i] = scale * unit(rng);
+  return v;
+}
+
+double max_abs(const Eigen::SparseMatrix<double>& k) {
+  double m = 0.0;
+  for (Eigen::Index i = 0; i < k.nonZeros(); ++i) m = std::max(m, std::abs(k.valuePtr()[i]));
+  return m;
+}
+
+TEST(NonlinearShell, AtRestTheForcesVanishAndTheTangentIsK) {
+  for (const Case& c : cases()) {
+    auto model = ShellModel::build(c.mesh, material()).value();
+    auto shell = NonlinearShell::build(model);
+    EXPECT_EQ(shell->num_points(), model->quadrature().size());
+    ShellState state;
+    ASSERT_TRUE(shell->evaluate(Eigen::VectorXd::Zero(model->num_dofs()), state, true)) << c.name;
+    EXPECT_EQ(state.energy, 0.0) << c.name;
+    EXPECT_EQ(state.internal_force.cwiseAbs().maxCoeff(), 0.0) << c.name;
+
+    Eigen::SparseMatrix<double> tangent;
+    shell->assemble_tangent(state, 0.0, tangent);
+    const Eigen::SparseMatrix<double>& k = model->stiffness();
+    ASSERT_EQ(tangent.nonZeros(), k.nonZeros());
+    const Eigen::SparseMatrix<double> diff = tangent - k;
+    EXPECT_LT(max_abs(diff), 1e-12 * max_abs(k)) << c.name;
+
+    std::mt19937 rng(7);
+    const Eigen::MatrixXd v = Eigen::MatrixXd::NullaryExpr(model->num_dofs(), 3, [&] {
+      return std::uniform_real_distribution<double>(-1.0, 1.0)(rng);
+    });
+    Eigen::MatrixXd kv;
+    shell->tangent_product(state, 0.0, v, kv);
+    const Eigen::MatrixXd expected = k * v;
+    EXPECT_LT((kv - expected).norm(), 1e-12 * expected.norm()) << c.name;
+  }
+}
+
+TEST(NonlinearShell, TangentIsTheDerivativeOfTheInternalForces) {
+  for (const Case& c : cases()) {
+    auto model = ShellModel::build(c.mesh, material()).value();
+    auto shell = NonlinearShell::build(model);
+    const double size = c.mesh.bounding_diagonal();
+    std::mt19937 rng(3);
+    for (int trial = 0; trial < 2; ++trial) {
+      // A random state (large displacements, strains of a few percent) and direction.
+      const Eigen::VectorXd u = random_vector(model->num_dofs(), 0.02 * size, rng);
+      const Eigen::VectorXd v = random_vector(model->num_dofs(), 1.0, rng);
+      ShellState state, plus, minus;
+      ASSERT_TRUE(shell->evaluate(u, state, true)) << c.name;
+      // The second trial adds a follower pressure whose forces are as large as the internal ones.
+      const double pressure = trial == 0 ? 0.0 : state.internal_force.norm() / state.pressure_force.norm();
+      Eigen::MatrixXd jv;
+      shell->tangent_product(state, pressure, v, jv);
+      const double h = 1e-6 * size;
+      ASSERT_TRUE(shell->evaluate(u + h * v, plus, true));
+      ASSERT_TRUE(shell->evaluate(u - h * v, minus, true));
+      const Eigen::VectorXd fd = ((plus.internal_force - pressure * plus.pressure_force) -
+                                  (minus.internal_force - pressure * minus.pressure_force)) /
+                                 (2.0 * h);
+      EXPECT_LT((fd - jv.col(0)).norm(), 1e-6 * jv.norm()) << c.name << " pressure " << pressure;
+      // The internal forces are the gradient of the energy.
+      const double energy_fd = (plus.energy - minus.energy) / (2.0 * h);
+      EXPECT_NEAR(energy_fd, state.internal_force.dot(v), 1e-6 * state.internal_force.norm() * v.norm()) << c.name;
+      // The assembled tangent is the same operator (its symmetric part, with a pressure).
+      Eigen::SparseMatrix<double> tangent;
+      shell->assemble_tangent(state, pressure, tangent);
+      const Eigen::SparseMatrix<double> asym = tangent - Eigen::SparseMatrix<double>(tangent.transpose());
+      EXPECT_LT(max_abs(asym), 1e-12 * max_abs(tangent)) << c.name;
+      EXPECT_NEAR(v.dot(tangent * v), v.dot(jv.col(0)), 1e-10 * std::abs(v.dot(jv.col(0))) + 1e-12 * jv.norm() * v.norm())
+          << c.name;
+      if (pressure == 0.0) {
+        const Eigen::VectorXd tv = tangent * v;
+        EXPECT_LT((tv - jv.col(0)).norm(), 1e-11 * jv.norm()) << c.name;
+      }
+    }
+  }
+}
+
+TEST(NonlinearShell, RigidMotionsOfAnySizeAreUnstrained) {
+  for (const Case& c : cases()) {
+    auto model = ShellModel::build(c.mesh, material()).value();
+    auto shell = NonlinearShell::build(model);
+    const double size = c.mesh.bounding_diagonal();
+    // Scale of forces: what K gives for a displacement of the object's size.
+    std::mt19937 rng(5);
+    const Eigen::VectorXd probe = random_vector(model->num_dofs(), size, rng);
+    const double force_scale = (model->stiffness() * probe).norm();
+    for (double degrees : {30.0, 90.0, 180.0}) {
+      const Eigen::Matrix3d r = Eigen::AngleAxisd(degrees * M_PI / 180.0, Vec3(1.0, 2.0, 3.0).normalized()).toRotationMatrix();
+      Eigen::VectorXd u(model->num_dofs());
+      for (int32_t i = 0; i < model->num_control_points(); ++i) {
+        const Vec3 x = c.mesh.positions()[static_cast<size_t>(i)];
+        u.segment<3>(3 * i) = r * x - x + Vec3(0.1, -0.2, 0.3) * size;
+      }
+      ShellState state;
+      ASSERT_TRUE(shell->evaluate(u, state, false)) << c.name;
+      EXPECT_LT(state.internal_force.norm(), 1e-13 * force_scale) << c.name << " " << degrees;
+      // The linear model, by contrast, strains it.
+      EXPECT_GT((model->stiffness() * u).norm(), 1e-3 * force_scale) << c.name << " " << degrees;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace softshell::engine::internal

@@ -1,0 +1,241 @@
+// The nonlinear model's equilibrium: rigid motions, the limit of small loads, warm starts,
+// constraints and refusals. (The published benchmarks are in nonlinear_reference_test.cpp.)
+#include "softshell/engine/nonlinear_solver.h"
+
+#include <cmath>
+
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include "softshell/engine/solver.h"
+#include "solver_testing.h"
+#include "test_meshes.h"
+
+namespace softshell::engine {
+namespace {
+
+Material material() { return Material{2.0e9, 0.35, 0.002, 1000.0}; }
+
+Vec3 limit_displacement(const ShellModel& model, const Eigen::VectorXd& u, const SurfacePoint& p) {
+  LimitStencil st = model.evaluator().stencil(p);
+  Vec3 d = Vec3::Zero();
+  for (size_t k = 0; k < st.size(); ++k) d += st.position[k] * u.segment<3>(3 * st.indices[k]);
+  return d;
+}
+
+// A plate clamped along x = 0 (two columns of control points), 0.4 x 0.2, t = 2 mm.
+struct Cantilever {
+  ControlMesh mesh = test::make_grid(8, 4, 0.4, 0.2);
+  std::vector<VertexConstraint> clamp() const {
+    std::vector<VertexConstraint> out;
+    for (int j = 0; j <= 4; ++j) {
+      for (int i = 0; i <= 1; ++i) out.push_back({test::grid_index(8, i, j), kAxisAll, Vec3::Zero()});
+    }
+    return out;
+  }
+  SurfacePoint tip() const { return SurfacePoint{8 * 2 - 1, 0, 1.0, 0.0}; }  // (0.4, 0.1)
+};
+
+TEST(NonlinearSolver, SmallLoadsTendToTheLinearAnswer) {
+  Cantilever c;
+  auto model = ShellModel::build(c.mesh, material()).value();
+  auto cache = std::make_shared<FactorCache>();
+  Solver linear(model, cache);
+  NonlinearSolver nonlinear(model, cache);
+  // The load that deflects the tip by about 2% of the length in the linear model.
+  DeformationRequest unit;
+  unit.vertex_constraints = c.clamp();
+  unit.surface_forces.push_back({c.tip(), Vec3(0.0, 0.0, -1.0)});
+  const double w_unit = -limit_displacement(*model, linear.solve(unit)->displacement, c.tip()).z();
+  const double p0 = 0.02 * 0.4 / w_unit;
+  std::vector<double> difference;
+  for (double scale : {1.0, 0.1, 0.01}) {
+    DeformationRequest request = unit;
+    request.surface_forces[0].force = Vec3(0.0, 0.0, -p0 * scale);
+    auto lin = linear.solve(request);
+    auto non = nonlinear.solve(request);
+    ASSERT_TRUE(lin.ok() && non.ok()) << (non.ok() ? "" : non.error().message);
+    EXPECT_LT(non->stats.residual, 1e-8);
+    difference.push_back((non->displacement - lin->displacement).norm() / lin->displacement.norm());
+  }
+  std::printf("relative difference nonlinear - linear: %.3e %.3e %.3e\n", difference[0], difference[1], difference[2]);
+  // About a percent at a 2% deflection, then linear in the load.
+  EXPECT_GT(difference[0], 1e-3);
+  EXPECT_LT(difference[0], 0.05);
+  EXPECT_NEAR(difference[1] / difference[0], 0.1, 0.015);
+  EXPECT_NEAR(difference[2] / difference[1], 0.1, 0.002);
+}
+
+// Part of the shell is turned rigidly through `degrees` about an axis; the rest must follow with
+// no strain, wherever the linear model stretches it.
+void check_rigid_rotation(const ControlMesh& mesh, const std::vector<int32_t>& held, const Vec3& axis,
+                          const Vec3& through, const std::string& name) {
+  auto model = ShellModel::build(mesh, material()).value();
+  auto cache = std::make_shared<FactorCache>();
+  Solver linear(model, cache);
+  NonlinearSolver nonlinear(model, cache);
+  const double size = mesh.bounding_diagonal();
+  for (double degrees : {30.0, 90.0, 180.0}) {
+    const Eigen::Matrix3d r = Eigen::AngleAxisd(degrees * M_PI / 180.0, axis.normalized()).toRotationMatrix();
+    auto rigid = [&](int32_t v) {
+      const Vec3 x = mesh.positions()[static_cast<size_t>(v)];
+      return Vec3(r * (x - through) + through - x);
+    };
+    DeformationRequest request;
+    for (int32_t v : held) request.vertex_constraints.push_back({v, kAxisAll, rigid(v)});
+    auto solution = nonlinear.solve(request);
+    ASSERT_TRUE(solution.ok()) << name << " " << degrees << ": " << solution.error().message;
+    double worst = 0.0;
+    for (int32_t v = 0; v < mesh.num_vertices(); ++v) {
+      worst = std::max(worst, (solution->displacement.segment<3>(3 * v) - rigid(v)).norm());
+    }
+    EXPECT_LT(worst, 1e-7 * size) << name << " " << degrees;
+    EXPECT_LT(solution->stats.residual, 1e-8) << name << " " << degrees;
+    // The strain energy of a rigid motion is zero: compare with what the linear answer stores.
+    auto lin = linear.solve(request);
+    ASSERT_TRUE(lin.ok());
+    EXPECT_LT(solution->stats.strain_energy, 1e-12 * model->strain_energy(lin->displacement)) << name << " " << degrees;
+    double linear_worst = 0.0;
+    for (int32_t v = 0; v < mesh.num_vertices(); ++v) {
+      linear_worst = std::max(linear_worst, (lin->displacement.segment<3>(3 * v) - rigid(v)).norm());
+    }
+    if (degrees >= 90.0) {
+      EXPECT_GT(linear_worst, 0.1 * size) << name;
+    }
+    std::printf("%s, %3.0f degrees: nonlinear %2d iterations, %2d load steps, off rigid by %.1e of the size "
+                "(linear: %.2f)\n",
+                name.c_str(), degrees, solution->stats.iterations, solution->stats.load_steps, worst / size,
+                linear_worst / size);
+  }
+}
+
+TEST(NonlinearSolver, PrescribedRigidRotationOfPartOfAFlatPlateTurnsAllOfIt) {
+  const ControlMesh plate = test::make_grid(8, 4, 0.8, 0.4);
+  std::vector<int32_t> held;
+  for (int j = 0; j <= 4; ++j) {
+    for (int i = 0; i <= 1; ++i) held.push_back(test::grid_index(8, i, j));
+  }
+  check_rigid_rotation(plate, held, Vec3(0.0, 1.0, 0.0), Vec3(0.05, 0.0, 0.0), "flat plate");
+}
+
+TEST(NonlinearSolver, PrescribedRigidRotationOfPartOfACurvedShellTurnsAllOfIt) {
+  const ControlMesh helmet = test::load_asset_mesh("catmark_helmet.obj");
+  // The control points with the lowest x (a connected cap of the helmet).
+  std::vector<int32_t> order(static_cast<size_t>(helmet.num_vertices()));
+  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int32_t>(i);
+  std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
+    return helmet.positions()[static_cast<size_t>(a)].x() < helmet.positions()[static_cast<size_t>(b)].x();
+  });
+  order.resize(order.size() / 5);
+  check_rigid_rotation(helmet, order, Vec3(0.3, 1.0, 0.5), helmet.positions()[static_cast<size_t>(order[0])],
+                       "helmet");
+}
+
+TEST(NonlinearSolver, WarmStartFromThePreviousAnswerGivesTheSameAnswer) {
+  Cantilever c;
+  auto model = ShellModel::build(c.mesh, material()).value();
+  auto cache = std::make_shared<FactorCache>();
+  NonlinearSolver solver(model, cache);
+  // A tip load raised in steps (to a deflection of about a third of the length), each solve
+  // starting from the previous answer; then the last load from rest.
+  DeformationRequest request;
+  request.vertex_constraints = c.clamp();
+  request.surface_forces.push_back({c.tip(), Vec3::Zero()});
+  Eigen::VectorXd u = Eigen::VectorXd::Zero(model->num_dofs());
+  int warm_iterations = 0;
+  for (int step = 1; step <= 5; ++step) {
+    request.surface_forces[0].force = Vec3(0.0, 0.0, -2.0 * step);
+    auto warm = solver.solve(request, u);
+    ASSERT_TRUE(warm.ok()) << warm.error().message;
+    EXPECT_LT(warm->stats.residual, 1e-8);
+    u = warm->displacement;
+    warm_iterations = warm->stats.iterations;
+  }
+  EXPECT_GT(-limit_displacement(*model, u, c.tip()).z(), 0.1);
+  NonlinearSolver fresh(model, cache);
+  auto cold = fresh.solve(request);
+  ASSERT_TRUE(cold.ok()) << cold.error().message;
+  EXPECT_LT((cold->displacement - u).norm(), 1e-6 * u.norm());
+  EXPECT_LT(warm_iterations, cold->stats.iterations);
+}
+
+TEST(NonlinearSolver, RefusesWhatItCannotBringToEquilibrium) {
+  Cantilever c;
+  auto model = ShellModel::build(c.mesh, material()).value();
+  NonlinearOptions options;
+  options.max_iterations = 3;
+  NonlinearSolver solver(model, std::make_shared<FactorCache>(), options);
+  DeformationRequest request;
+  request.vertex_constraints = c.clamp();
+  request.limit_constraints.push_back({c.tip(), Vec3(-0.3, 0.0, 0.3), {}, {}});
+  auto solution = solver.solve(request);
+  ASSERT_FALSE(solution.ok());
+  EXPECT_EQ(solution.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(solution.error().message.find("equilibrium"), std::string::npos) << solution.error().message;
+  EXPECT_NE(solution.error().message.find("Try"), std::string::npos) << solution.error().message;
+  // A free body is refused as by the linear solver, naming the motion.
+  DeformationRequest free_body;
+  free_body.forces.push_back({0, Vec3(0.0, 0.0, 1.0)});
+  auto undetermined = solver.solve(free_body);
+  ASSERT_FALSE(undetermined.ok());
+  EXPECT_EQ(undetermined.error().code, ErrorCode::kUnprocessable);
+  // Bad input.
+  auto bad = solver.solve(request, Eigen::VectorXd::Zero(5));
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.error().code, ErrorCode::kInvalidArgument);
+}
+
+// The safety net on nonlinear answers: a converged answer passes its check (ratio <= 1, reported);
+// an answer corrupted just before the check (as a wrong state or a lost constraint would leave
+// it) is refused with a message saying what is off, never returned.
+TEST(NonlinearSolver, EveryAnswerIsCheckedBeforeItLeaves) {
+  Cantilever c;
+  auto model = ShellModel::build(c.mesh, material()).value();
+  NonlinearSolver solver(model, std::make_shared<FactorCache>());
+  DeformationRequest request;
+  request.vertex_constraints = c.clamp();
+  request.surface_forces.push_back({c.tip(), Vec3(0.0, 0.0, -5.0)});
+  const SurfacePoint side{8 * 2 - 1, 0, 1.0, 1.0};
+  request.limit_constraints.push_back({side, Vec3(0.0, 0.0, -0.05), {}, {}});
+  auto good = solver.solve(request);
+  ASSERT_TRUE(good.ok()) << good.error().message;
+  EXPECT_GT(good->stats.check_ratio, 0.0);
+  EXPECT_LE(good->stats.check_ratio, 1.0);
+
+  struct Hook {
+    explicit Hook(internal::FastPathCorruption f) { internal::g_corrupt_nonlinear_answer.store(f); }
+    ~Hook() { internal::g_corrupt_nonlinear_answer.store(nullptr); }
+  };
+  {
+    // A free control point moved by 1e-4 of the size: out of equilibrium.
+    Hook hook([](Eigen::VectorXd& u) { u[3 * test::grid_index(8, 4, 2) + 2] += 4e-5; });
+    auto bad = solver.solve(request);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.error().code, ErrorCode::kUnprocessable);
+    EXPECT_NE(bad.error().message.find("out-of-balance"), std::string::npos) << bad.error().message;
+  }
+  {
+    // A clamped control point moved.
+    Hook hook([](Eigen::VectorXd& u) { u[3 * test::grid_index(8, 0, 2) + 2] += 1e-9; });
+    auto bad = solver.solve(request);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.error().code, ErrorCode::kUnprocessable);
+    EXPECT_NE(bad.error().message.find("vertex constraint"), std::string::npos) << bad.error().message;
+  }
+  {
+    // Every free control point moved rigidly by 1e-6 of the length in z: hardly any strain, but
+    // the limit constraint is off (checked first).
+    Hook hook([](Eigen::VectorXd& u) {
+      for (int j = 0; j <= 4; ++j) {
+        for (int i = 2; i <= 8; ++i) u[3 * test::grid_index(8, i, j) + 2] += 4e-7;
+      }
+    });
+    auto bad = solver.solve(request);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.error().code, ErrorCode::kUnprocessable);
+    EXPECT_NE(bad.error().message.find("limit constraint"), std::string::npos) << bad.error().message;
+  }
+}
+
+}  // namespace
+}  // namespace softshell::engine
