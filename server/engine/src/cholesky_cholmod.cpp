@@ -3,6 +3,7 @@
 // forward sweep of our own over the supernodes local right-hand sides reach.
 #include "cholesky_factor.h"
 
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
@@ -71,6 +72,28 @@ std::unique_lock<std::mutex> blas_turn() {
   return g_blas.thread_unsafe ? std::unique_lock<std::mutex>(g_blas_mutex) : std::unique_lock<std::mutex>();
 }
 
+// The first column of L whose diagonal entry is NaN or infinite, or -1.
+Eigen::Index first_nonfinite_pivot(const cholmod_factor* l) {
+  const auto* x = static_cast<const double*>(l->x);
+  if (l->is_super) {
+    const auto* super = static_cast<const int*>(l->super);
+    const auto* pi = static_cast<const int*>(l->pi);
+    const auto* px = static_cast<const int*>(l->px);
+    for (size_t s = 0; s < l->nsuper; ++s) {
+      const int ncols = super[s + 1] - super[s], nrows = pi[s + 1] - pi[s];
+      for (int j = 0; j < ncols; ++j) {
+        if (!std::isfinite(x[px[s] + static_cast<ptrdiff_t>(j) * (nrows + 1)])) return super[s] + j;
+      }
+    }
+    return -1;
+  }
+  const auto* p = static_cast<const int*>(l->p);
+  for (size_t j = 0; j < l->n; ++j) {
+    if (!std::isfinite(x[p[j]])) return static_cast<Eigen::Index>(j);
+  }
+  return -1;
+}
+
 }  // namespace
 
 struct CholeskyFactor::State {
@@ -120,6 +143,20 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
     // into it skips the analysis.
     l = same_pattern ? cholmod_copy_factor(same_pattern->state_->l, c) : cholmod_analyze(&a, c);
     ok = l && cholmod_factorize(&a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
+  }
+  // CHOLMOD stops at a pivot that is not positive but passes NaN through (simplicial: NaN <= 0
+  // is false); a non-finite value anywhere in L reaches a later pivot (L_kk^2 = A_kk - sum of
+  // squares of row k), so the pivots tell.
+  if (ok) {
+    const Eigen::Index bad = first_nonfinite_pivot(l);
+    if (bad >= 0) {
+      ok = false;
+      failure.not_finite = true;
+      const auto* perm = static_cast<const int*>(l->Perm);
+      failure.column = perm ? perm[bad] : bad;
+      cholmod_free_factor(&l, c);
+      return nullptr;
+    }
   }
   if (!ok) {
     failure.out_of_memory = c->status == CHOLMOD_OUT_OF_MEMORY;

@@ -382,8 +382,17 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
       head[t] = -1;
       auto diagonal = lt.topRows(ncols);
       const Eigen::Index bad = Eigen::internal::llt_inplace<double, Eigen::Lower>::blocked(diagonal);
-      if (bad >= 0 || !diagonal.diagonal().allFinite()) {
-        failure.column = s.original[static_cast<size_t>(k1 + std::max<Eigen::Index>(bad, 0))];
+      // Eigen's LLT stops at a pivot that is not positive but passes NaN through; a non-finite
+      // value anywhere reaches a later pivot (L_kk^2 = A_kk - sum of squares of row k).
+      Eigen::Index column = bad;
+      if (column < 0) {
+        for (Eigen::Index j = 0; j < ncols && column < 0; ++j) {
+          if (!std::isfinite(diagonal(j, j))) column = j;
+        }
+        failure.not_finite = column >= 0;
+      }
+      if (column >= 0) {
+        failure.column = s.original[static_cast<size_t>(k1 + column)];
         return nullptr;
       }
       low = std::min(low, diagonal.diagonal().minCoeff());

@@ -5,7 +5,7 @@
 //   cholmod  cholesky_cholmod.cpp: CHOLMOD's supernodal factor (BLAS). Debian's libcholmod3
 //            holds CHOLMOD's GPL modules (Supernodal, Modify, MatrixOps), so a binary linking it
 //            carries GPL code.
-//   eigen    cholesky_eigen.cpp: a simplicial up-looking L L^T on Eigen's AMD ordering, written
+//   eigen    cholesky_eigen.cpp: a supernodal left-looking L L^T on Eigen's AMD ordering, written
 //            here (MPL-2.0 Eigen headers only; no BLAS, no SuiteSparse library).
 // Both are thread-safe once built: any number of threads may call forward/backward at once.
 
@@ -22,6 +22,7 @@ class CholeskyFactor {
   /// Why factorize() returned no factor.
   struct Failure {
     Eigen::Index column = -1;   ///< first column (in A's numbering) whose pivot was not positive; -1 if unknown
+    bool not_finite = false;    ///< that pivot was NaN or infinite (A holds non-finite values)
     bool out_of_memory = false;
   };
 
@@ -29,7 +30,7 @@ class CholeskyFactor {
   /// below the diagonal are ignored). With `same_pattern` (a factor of a matrix with exactly this
   /// upper pattern; the caller guarantees it), its ordering and symbolic analysis are reused and
   /// only the numeric factorization runs. Returns null, and says why in `failure`, if A is not
-  /// positive definite or memory ran out.
+  /// positive definite, holds NaN or infinite values (never a factor with NaNs), or memory ran out.
   static std::unique_ptr<CholeskyFactor> factorize(const Eigen::SparseMatrix<double>& upper,
                                                    const CholeskyFactor* same_pattern, Failure& failure);
   ~CholeskyFactor();

@@ -111,6 +111,14 @@ void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factor
     const int32_t dof = failure.column >= 0 && static_cast<size_t>(failure.column) < factored_.size()
                             ? factored_[static_cast<size_t>(failure.column)]
                             : -1;
+    if (failure.not_finite) {
+      throw FactorizationFailed(ErrorCode::kUnprocessable,
+          "the stiffness matrix holds NaN or infinite values" +
+              (dof >= 0 ? " (reached at control point " + std::to_string(dof / 3) + ", axis " +
+                              std::string(1, "xyz"[dof % 3]) + ")"
+                        : std::string()) +
+              ": check the mesh and the material for non-finite or degenerate values");
+    }
     throw FactorizationFailed(ErrorCode::kUnprocessable,
          "the stiffness matrix with the prescribed DOFs removed is not positive definite" +
              (dof >= 0 ? " (first failing pivot: control point " + std::to_string(dof / 3) + ", axis " +
