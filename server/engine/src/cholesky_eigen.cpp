@@ -11,7 +11,7 @@
 // and Davis's CHOLMOD; the code is ours. The layout of L is CHOLMOD's supernodal one (per
 // supernode a dense column-major block: its columns' rows, diagonal block first).
 //
-// File length: ~400 lines, one algorithm (symbolic analysis, numeric factorization, two sweeps).
+// File length: ~510 lines, one algorithm (symbolic analysis, numeric factorization, two sweeps).
 #ifndef EIGEN_MPL2_ONLY
 #define EIGEN_MPL2_ONLY
 #endif
