@@ -25,8 +25,9 @@ if(NOT TARGET OpenSSL::Crypto)
   find_package(OpenSSL 1.1.1 REQUIRED COMPONENTS Crypto)
 endif()
 
-# CHOLMOD (SuiteSparse 5.x ships no CMake package on Debian 12).
-if(NOT TARGET softshell_dep::cholmod)
+# CHOLMOD (SuiteSparse 5.x ships no CMake package on Debian 12); only for the CHOLMOD backend
+# (SOFTSHELL_SPARSE_CHOLESKY=cholmod, the default).
+if(NOT SOFTSHELL_SPARSE_CHOLESKY STREQUAL "eigen" AND NOT TARGET softshell_dep::cholmod)
   find_path(SOFTSHELL_CHOLMOD_INCLUDE_DIR cholmod.h PATH_SUFFIXES suitesparse REQUIRED)
   find_library(SOFTSHELL_CHOLMOD_LIBRARY cholmod REQUIRED)
   find_library(SOFTSHELL_SUITESPARSECONFIG_LIBRARY suitesparseconfig REQUIRED)

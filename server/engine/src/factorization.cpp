@@ -2,72 +2,13 @@
 
 #include <atomic>
 #include <chrono>
-#include <cstdlib>
 #include <cmath>
-#include <cstring>
-#include <limits>
-#include <mutex>
 #include <string>
 
-#include <cholmod.h>
-#include <dlfcn.h>
+#include "cholesky_factor.h"
 
 namespace softshell::engine::internal {
 namespace {
-
-// CHOLMOD keeps its workspace and settings in a cholmod_common; one per thread lets many solves
-// run at once on a shared (read-only) factor.
-struct ThreadCommon {
-  cholmod_common common;
-  ThreadCommon() {
-    cholmod_start(&common);
-    common.print = 0;        // errors are reported through our own messages
-    common.error_handler = nullptr;
-    common.supernodal = CHOLMOD_AUTO;
-    common.final_ll = 1;     // keep L L^T: the solve is two triangular sweeps
-  }
-  ~ThreadCommon() { cholmod_finish(&common); }
-  ThreadCommon(const ThreadCommon&) = delete;
-  ThreadCommon& operator=(const ThreadCommon&) = delete;
-};
-
-cholmod_common* thread_common() {
-  thread_local ThreadCommon common;
-  return &common.common;
-}
-
-// CHOLMOD's supernodal factorization and solves call BLAS. OpenBLAS built without threading
-// (Debian's libopenblas0-serial) keeps global buffers and is not safe to call from several
-// threads at once: concurrent solves then return wrong numbers. Whatever BLAS the system loaded,
-// ask it; if it is such an OpenBLAS, the engine's BLAS-using calls take turns. Reference BLAS and
-// threaded OpenBLAS (libopenblas0-pthread, what build.sh installs) run concurrently.
-//
-// A threaded OpenBLAS is also told to use one thread per call (unless OPENBLAS_NUM_THREADS says
-// otherwise): the service already runs solves in parallel, one per core, and BLAS threads on top
-// would only oversubscribe the cores (measured: 2 concurrent clients got less throughput than 1).
-//
-// The probe runs once, when the engine library is loaded (BLAS is loaded before it, as CHOLMOD's
-// dependency), so no kernel ever calls dlsym or changes BLAS settings.
-struct BlasPolicy {
-  bool thread_unsafe = false;  // calls must take turns
-};
-
-BlasPolicy probe_blas() {
-  using Query = int (*)();
-  auto query = reinterpret_cast<Query>(dlsym(RTLD_DEFAULT, "openblas_get_parallel"));
-  if (query != nullptr && query() != 0 && std::getenv("OPENBLAS_NUM_THREADS") == nullptr) {
-    using SetThreads = void (*)(int);
-    if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(1);
-  }
-  return BlasPolicy{query != nullptr && query() == 0};  // 0 = sequential build
-}
-
-const BlasPolicy g_blas = probe_blas();
-std::mutex g_blas_mutex;
-
-std::unique_lock<std::mutex> blas_turn() {
-  return g_blas.thread_unsafe ? std::unique_lock<std::mutex>(g_blas_mutex) : std::unique_lock<std::mutex>();
-}
 
 std::atomic<uint64_t> g_next_factor_id{1};
 
@@ -75,26 +16,75 @@ std::atomic<uint64_t> g_next_factor_id{1};
 // a few hundred terms, with margin).
 constexpr double kZeroEnergyResidual = 1e-11;
 
+uint64_t mix(uint64_t h, uint64_t x) {  // splitmix64 of x, folded into h
+  x += 0x9e3779b97f4a7c15ULL + (h << 6) + (h >> 2);
+  x ^= x >> 30;
+  x *= 0xbf58476d1ce4e5b9ULL;
+  x ^= x >> 27;
+  x *= 0x94d049bb133111ebULL;
+  x ^= x >> 31;
+  return h ^ x;
+}
+
+uint64_t pattern_hash(const Eigen::SparseMatrix<double>& a) {
+  uint64_t h = mix(0x243f6a8885a308d3ULL, static_cast<uint64_t>(a.cols()));
+  for (Eigen::Index j = 0; j <= a.cols(); ++j) h = mix(h, static_cast<uint64_t>(a.outerIndexPtr()[j]));
+  for (Eigen::Index p = 0; p < a.nonZeros(); ++p) h = mix(h, static_cast<uint64_t>(a.innerIndexPtr()[p]));
+  return h;
+}
+
+// The upper triangle of `a` (symmetric, either triangle or both stored) in compressed CSC,
+// restricted and renumbered by `position` (-1: left out) to `n` rows and columns.
+Eigen::SparseMatrix<double> upper_part(const Eigen::SparseMatrix<double>& a, const std::vector<int32_t>& position,
+                                       const std::vector<int32_t>& columns) {
+  const auto n = static_cast<Eigen::Index>(columns.size());
+  Eigen::SparseMatrix<double> out(n, n);
+  Eigen::VectorXi count = Eigen::VectorXi::Zero(n);
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const int32_t col = columns[static_cast<size_t>(j)];
+    for (Eigen::SparseMatrix<double>::InnerIterator it(a, col); it; ++it) {
+      if (it.row() <= col && position[static_cast<size_t>(it.row())] >= 0) ++count[j];
+    }
+  }
+  out.reserve(count);
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const int32_t col = columns[static_cast<size_t>(j)];
+    for (Eigen::SparseMatrix<double>::InnerIterator it(a, col); it; ++it) {
+      const int32_t row = position[static_cast<size_t>(it.row())];
+      if (it.row() <= col && row >= 0) out.insert(row, j) = it.value();
+    }
+  }
+  out.makeCompressed();
+  return out;
+}
+
 }  // namespace
 
 Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
                              const Eigen::MatrixXd& motions)
     : id_(g_next_factor_id++), fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
-  factorize(model.stiffness(), nullptr, motions);
+  const auto start = std::chrono::steady_clock::now();
+  factorize(model.stiffness(), nullptr);
+  compute_pin_block(model.stiffness(), motions);
+  factor_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
 Factorization::Factorization(const Eigen::SparseMatrix<double>& k, std::vector<int32_t> fixed,
-                             std::vector<int32_t> pinned, const Factorization* same_pattern)
+                             std::vector<int32_t> pinned, const Factorization* same_pattern,
+                             const Eigen::MatrixXd& motions)
     : id_(g_next_factor_id++), fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
-  if (same_pattern && (same_pattern->fixed_ != fixed_ || same_pattern->pinned_ != pinned_ || !same_pattern->factor_)) {
+  const auto start = std::chrono::steady_clock::now();
+  if (same_pattern && (same_pattern->fixed_ != fixed_ || same_pattern->pinned_ != pinned_ ||
+                       same_pattern->position_.size() != static_cast<size_t>(k.rows()))) {
     same_pattern = nullptr;
   }
-  factorize(k, same_pattern, Eigen::MatrixXd());
+  factorize(k, same_pattern);
+  compute_pin_block(k, motions);
+  factor_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern,
-                              const Eigen::MatrixXd& motions) {
-  const auto start = std::chrono::steady_clock::now();
+void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern) {
+  if (k.rows() != k.cols()) fail(ErrorCode::kInternal, "Factorization: the matrix is not square");
   const auto n = static_cast<size_t>(k.rows());
   position_.assign(n, -1);
   std::vector<char> excluded(n, 0);
@@ -106,56 +96,29 @@ void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factor
       factored_.push_back(static_cast<int32_t>(d));
     }
   }
-  if (factored_.empty()) {  // everything fixed (or pinned): nothing to factor
-    compute_pin_block(k, motions);
-    return;
-  }
+  bytes_ = (2 * n + fixed_.size() + pinned_.size() + factored_.size()) * sizeof(int32_t);
+  if (factored_.empty()) return;  // everything fixed (or pinned): nothing to factor
 
-  // Upper triangle of K_aa in CSC (CHOLMOD stype = 1).
-  size_t nnz = 0;
-  for (int32_t col : factored_) {
-    for (Eigen::SparseMatrix<double>::InnerIterator it(k, col); it; ++it) {
-      if (it.row() <= col && position_[static_cast<size_t>(it.row())] >= 0) ++nnz;
+  const Eigen::SparseMatrix<double> a = upper_part(k, position_, factored_);
+  pattern_hash_ = pattern_hash(a);
+  const CholeskyFactor* reuse =
+      same_pattern && same_pattern->factor_ && same_pattern->pattern_hash_ == pattern_hash_ ? same_pattern->factor_.get()
+                                                                                          : nullptr;
+  CholeskyFactor::Failure failure;
+  factor_ = CholeskyFactor::factorize(a, reuse, failure);
+  if (!factor_) {
+    if (failure.out_of_memory) fail(ErrorCode::kResourceExhausted, "not enough memory to factorize K");
+    const int32_t dof = failure.column >= 0 && static_cast<size_t>(failure.column) < factored_.size()
+                            ? factored_[static_cast<size_t>(failure.column)]
+                            : -1;
+    if (failure.not_finite) {
+      throw FactorizationFailed(ErrorCode::kUnprocessable,
+          "the stiffness matrix holds NaN or infinite values" +
+              (dof >= 0 ? " (reached at control point " + std::to_string(dof / 3) + ", axis " +
+                              std::string(1, "xyz"[dof % 3]) + ")"
+                        : std::string()) +
+              ": check the mesh and the material for non-finite or degenerate values");
     }
-  }
-  cholmod_common* c = thread_common();
-  const size_t na = factored_.size();
-  cholmod_sparse* a = cholmod_allocate_sparse(na, na, nnz, 1, 1, 1, CHOLMOD_REAL, c);
-  if (!a) fail(ErrorCode::kResourceExhausted, "not enough memory for the stiffness matrix of this constraint set");
-  auto* ap = static_cast<int*>(a->p);
-  auto* ai = static_cast<int*>(a->i);
-  auto* ax = static_cast<double*>(a->x);
-  size_t pos = 0;
-  for (size_t j = 0; j < na; ++j) {
-    ap[j] = static_cast<int>(pos);
-    const int32_t col = factored_[j];
-    for (Eigen::SparseMatrix<double>::InnerIterator it(k, col); it; ++it) {
-      const int32_t row = position_[static_cast<size_t>(it.row())];
-      if (it.row() <= col && row >= 0) {
-        ai[pos] = row;
-        ax[pos] = it.value();
-        ++pos;
-      }
-    }
-  }
-  ap[na] = static_cast<int>(pos);
-
-  cholmod_factor* l = nullptr;
-  bool ok = false;
-  {
-    const auto turn = blas_turn();
-    // A copy of a factor of the same pattern carries its ordering and supernodes: factorizing
-    // into it skips the analysis (the larger share of a small model's factorization).
-    l = same_pattern ? cholmod_copy_factor(reinterpret_cast<cholmod_factor*>(same_pattern->factor_), c)
-                     : cholmod_analyze(a, c);
-    ok = l && cholmod_factorize(a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
-  }
-  const size_t minor = l ? l->minor : 0;
-  cholmod_free_sparse(&a, c);
-  if (!ok) {
-    if (l) cholmod_free_factor(&l, c);
-    if (c->status == CHOLMOD_OUT_OF_MEMORY) fail(ErrorCode::kResourceExhausted, "not enough memory to factorize K");
-    const int32_t dof = minor < na ? factored_[minor] : -1;
     throw FactorizationFailed(ErrorCode::kUnprocessable,
          "the stiffness matrix with the prescribed DOFs removed is not positive definite" +
              (dof >= 0 ? " (first failing pivot: control point " + std::to_string(dof / 3) + ", axis " +
@@ -163,23 +126,8 @@ void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factor
                        : std::string()) +
              ": part of the shell can move without strain; add constraints there");
   }
-  factor_ = reinterpret_cast<cholmod_factor_struct*>(l);
-  if (l->is_super) {
-    const auto* super = static_cast<const int*>(l->super);
-    supernode_of_.resize(l->n);
-    for (size_t s = 0; s < l->nsuper; ++s) {
-      for (int col = super[s]; col < super[s + 1]; ++col) supernode_of_[static_cast<size_t>(col)] = static_cast<int32_t>(s);
-    }
-  }
-  const size_t int_size = sizeof(int);
-  bytes_ = l->is_super ? l->xsize * sizeof(double) + l->ssize * int_size + (3 * l->nsuper + 3) * int_size
-                       : l->nzmax * (sizeof(double) + int_size);
-  bytes_ += 4 * l->n * int_size + n * sizeof(int32_t) + factored_.size() * sizeof(int32_t) +
-            supernode_of_.size() * sizeof(int32_t);
-  compute_pin_block(k, motions);
-  bytes_ += static_cast<size_t>(pin_columns_.size() + pin_block_.size()) * sizeof(double) +
-            pin_position_.size() * sizeof(int32_t);
-  factor_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  reused_analysis_ = reuse != nullptr;
+  bytes_ += factor_->bytes();
 }
 
 void Factorization::compute_pin_block(const Eigen::SparseMatrix<double>& k, const Eigen::MatrixXd& motions) {
@@ -227,187 +175,43 @@ void Factorization::compute_pin_block(const Eigen::SparseMatrix<double>& k, cons
     pin_block_zeroed_ = nq == 0;
   }
   if (pin_block_zeroed_) pin_block_.setZero();
+  bytes_ += static_cast<size_t>(pin_columns_.size() + pin_block_.size()) * sizeof(double) +
+            pin_position_.size() * sizeof(int32_t);
 }
 
-Factorization::~Factorization() {
-  if (factor_) {
-    auto* l = reinterpret_cast<cholmod_factor*>(factor_);
-    cholmod_free_factor(&l, thread_common());
-  }
-}
-
-// Runs CHOLMOD's solve of `system` (CHOLMOD_L, _Lt, _P, _Pt) on a block of right-hand sides.
-Eigen::MatrixXd Factorization::apply(int system, const Eigen::MatrixXd& rhs) const {
-  if (!factor_ || rhs.cols() == 0) return Eigen::MatrixXd::Zero(rhs.rows(), rhs.cols());
-  cholmod_common* c = thread_common();
-  cholmod_dense b;
-  std::memset(&b, 0, sizeof b);
-  b.nrow = static_cast<size_t>(rhs.rows());
-  b.ncol = static_cast<size_t>(rhs.cols());
-  b.nzmax = b.nrow * b.ncol;
-  b.d = b.nrow;
-  b.x = const_cast<double*>(rhs.data());  // read only
-  b.xtype = CHOLMOD_REAL;
-  b.dtype = CHOLMOD_DOUBLE;
-  cholmod_dense* x = nullptr;
-  {
-    const auto turn = blas_turn();
-    x = cholmod_solve(system, reinterpret_cast<cholmod_factor*>(factor_), &b, c);
-  }
-  if (!x) fail(ErrorCode::kResourceExhausted, "not enough memory for the triangular solves");
-  Eigen::MatrixXd out = Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(x->x), rhs.rows(), rhs.cols());
-  cholmod_free_dense(&x, c);
-  return out;
-}
+Factorization::~Factorization() = default;
 
 Eigen::MatrixXd Factorization::forward(const Eigen::MatrixXd& rhs, double* fraction_read) const {
-  Eigen::MatrixXd x;
-  double fraction = 1.0;
-  if (!sparse_forward(rhs, x, fraction)) x = apply(CHOLMOD_L, apply(CHOLMOD_P, rhs));
-  if (fraction_read) *fraction_read = fraction;
-  return x;
-}
-
-bool Factorization::sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read) const {
-  const auto* l = reinterpret_cast<const cholmod_factor*>(factor_);
-  if (!l || !l->is_super || l->xtype != CHOLMOD_REAL || l->dtype != CHOLMOD_DOUBLE || rhs.cols() == 0) return false;
-  const auto* super = static_cast<const int*>(l->super);
-  const auto* pi = static_cast<const int*>(l->pi);
-  const auto* px = static_cast<const int*>(l->px);
-  const auto* rows = static_cast<const int*>(l->s);
-  const auto* perm = static_cast<const int*>(l->Perm);
-  const auto* values = static_cast<const double*>(l->x);
-  const auto n = static_cast<Eigen::Index>(l->n);
-  const size_t nsuper = l->nsuper;
-
-  // Which supernodes the sweep reaches: those holding a nonzero row of P B, and every supernode
-  // that one of them updates (its off-diagonal rows), in ascending order (parents come later).
-  std::vector<char> reached(nsuper, 0);
-  for (Eigen::Index k = 0; k < n; ++k) {
-    if (!rhs.row(perm ? perm[k] : k).isZero(0.0)) reached[static_cast<size_t>(supernode_of_[static_cast<size_t>(k)])] = 1;
-  }
-  size_t work = 0;
-  for (size_t s = 0; s < nsuper; ++s) {
-    if (!reached[s]) continue;
-    const int ncols = super[s + 1] - super[s];
-    work += static_cast<size_t>(pi[s + 1] - pi[s]) * static_cast<size_t>(ncols);
-    if (2 * work > l->xsize) return false;  // most of the factor: CHOLMOD's BLAS sweep is faster
-    for (int p = pi[s] + ncols; p < pi[s + 1]; ++p) reached[static_cast<size_t>(supernode_of_[static_cast<size_t>(rows[p])])] = 1;
-  }
-
-  x.resize(n, rhs.cols());
-  for (Eigen::Index k = 0; k < n; ++k) x.row(k) = rhs.row(perm ? perm[k] : k);
-  Eigen::MatrixXd update;
-  for (size_t s = 0; s < nsuper; ++s) {
-    if (!reached[s]) continue;
-    // Supernode s: columns k1..k1+ncols-1, a column-major nrows x ncols block whose top square is
-    // the lower-triangular diagonal block and whose other rows are listed in `rows`.
-    const int k1 = super[s], ncols = super[s + 1] - k1, nrows = pi[s + 1] - pi[s];
-    const Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> block(values + px[s], nrows, ncols,
-                                                                            Eigen::OuterStride<>(nrows));
-    auto xs = x.middleRows(k1, ncols);
-    if (xs.size() == 0) continue;  // no right-hand sides (an empty triangular solve is UB in Eigen)
-    block.topRows(ncols).triangularView<Eigen::Lower>().solveInPlace(xs);
-    if (nrows == ncols) continue;
-    update.noalias() = block.bottomRows(nrows - ncols) * xs;
-    for (int i = 0; i < nrows - ncols; ++i) x.row(rows[pi[s] + ncols + i]) -= update.row(i);
-  }
-  fraction_read = static_cast<double>(work) / static_cast<double>(l->xsize);
-  return true;
+  if (fraction_read) *fraction_read = 1.0;
+  if (!factor_ || rhs.cols() == 0) return Eigen::MatrixXd::Zero(rhs.rows(), rhs.cols());
+  return factor_->forward(rhs, fraction_read);
 }
 
 Eigen::MatrixXd Factorization::backward(const Eigen::MatrixXd& y) const {
-  return apply(CHOLMOD_Pt, apply(CHOLMOD_Lt, y));
+  if (!factor_ || y.cols() == 0) return Eigen::MatrixXd::Zero(y.rows(), y.cols());
+  return factor_->backward(y);
 }
 
 SparseCholesky::SparseCholesky(const Eigen::SparseMatrix<double>& a) {
   const auto n = static_cast<size_t>(a.rows());
   if (n == 0) return;
-  size_t nnz = 0;
-  for (Eigen::Index j = 0; j < a.outerSize(); ++j) {
-    for (Eigen::SparseMatrix<double>::InnerIterator it(a, j); it; ++it) nnz += it.row() <= j;
-  }
-  cholmod_common* c = thread_common();
-  cholmod_sparse* m = cholmod_allocate_sparse(n, n, nnz, 1, 1, 1, CHOLMOD_REAL, c);
-  if (!m) fail(ErrorCode::kResourceExhausted, "not enough memory for the zero-mode analysis");
-  auto* mp = static_cast<int*>(m->p);
-  auto* mi = static_cast<int*>(m->i);
-  auto* mx = static_cast<double*>(m->x);
-  size_t pos = 0;
-  for (Eigen::Index j = 0; j < a.outerSize(); ++j) {
-    mp[j] = static_cast<int>(pos);
-    for (Eigen::SparseMatrix<double>::InnerIterator it(a, j); it; ++it) {
-      if (it.row() > j) continue;
-      mi[pos] = static_cast<int>(it.row());
-      mx[pos] = it.value();
-      ++pos;
-    }
-  }
-  mp[n] = static_cast<int>(pos);
-  cholmod_factor* l = nullptr;
-  bool ok = false;
-  {
-    const auto turn = blas_turn();
-    l = cholmod_analyze(m, c);
-    ok = l && cholmod_factorize(m, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
-  }
-  cholmod_free_sparse(&m, c);
-  const bool out_of_memory = c->status == CHOLMOD_OUT_OF_MEMORY;
-  if (!ok) {
-    if (l) cholmod_free_factor(&l, c);
-    if (out_of_memory) fail(ErrorCode::kResourceExhausted, "not enough memory for the zero-mode analysis");
+  std::vector<int32_t> position(n), columns(n);
+  for (size_t i = 0; i < n; ++i) position[i] = columns[i] = static_cast<int32_t>(i);
+  CholeskyFactor::Failure failure;
+  factor_ = CholeskyFactor::factorize(upper_part(a, position, columns), nullptr, failure);
+  if (!factor_) {
+    if (failure.out_of_memory) fail(ErrorCode::kResourceExhausted, "not enough memory for the zero-mode analysis");
     return;
   }
-  // The pivots: the squared diagonal of L (supernodal: the diagonal of each supernode's block).
-  double low = std::numeric_limits<double>::infinity();
-  const auto* x = static_cast<const double*>(l->x);
-  if (l->is_super) {
-    const auto* super = static_cast<const int*>(l->super);
-    const auto* pi = static_cast<const int*>(l->pi);
-    const auto* px = static_cast<const int*>(l->px);
-    for (size_t s = 0; s < l->nsuper; ++s) {
-      const int ncols = super[s + 1] - super[s], nrows = pi[s + 1] - pi[s];
-      for (int j = 0; j < ncols; ++j) low = std::min(low, x[px[s] + static_cast<ptrdiff_t>(j) * (nrows + 1)]);
-    }
-    low *= low;
-  } else {
-    const auto* p = static_cast<const int*>(l->p);
-    for (size_t j = 0; j < l->n; ++j) low = std::min(low, x[p[j]]);
-    if (l->is_ll) low *= low;  // LDL^T keeps D on the diagonal
-  }
-  factor_ = reinterpret_cast<cholmod_factor_struct*>(l);
-  min_pivot_ = low;
+  min_pivot_ = factor_->min_pivot();
 }
 
-SparseCholesky::~SparseCholesky() {
-  if (factor_) {
-    auto* l = reinterpret_cast<cholmod_factor*>(factor_);
-    cholmod_free_factor(&l, thread_common());
-  }
-}
+SparseCholesky::~SparseCholesky() = default;
 
 Eigen::MatrixXd SparseCholesky::solve(const Eigen::MatrixXd& rhs) const {
   if (!factor_) fail(ErrorCode::kInternal, "SparseCholesky::solve without a factor");
   if (rhs.cols() == 0) return rhs;
-  cholmod_common* c = thread_common();
-  cholmod_dense b;
-  std::memset(&b, 0, sizeof b);
-  b.nrow = static_cast<size_t>(rhs.rows());
-  b.ncol = static_cast<size_t>(rhs.cols());
-  b.nzmax = b.nrow * b.ncol;
-  b.d = b.nrow;
-  b.x = const_cast<double*>(rhs.data());  // read only
-  b.xtype = CHOLMOD_REAL;
-  b.dtype = CHOLMOD_DOUBLE;
-  cholmod_dense* x = nullptr;
-  {
-    const auto turn = blas_turn();
-    x = cholmod_solve(CHOLMOD_A, reinterpret_cast<cholmod_factor*>(factor_), &b, c);
-  }
-  if (!x) fail(ErrorCode::kResourceExhausted, "not enough memory for the zero-mode analysis");
-  Eigen::MatrixXd out = Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(x->x), rhs.rows(), rhs.cols());
-  cholmod_free_dense(&x, c);
-  return out;
+  return factor_->backward(factor_->forward(rhs));
 }
 
 }  // namespace softshell::engine::internal

@@ -1,5 +1,7 @@
 #pragma once
-// A CHOLMOD Cholesky factor of K with a set of DOFs taken out (private to the engine).
+// A sparse Cholesky factor of K with a set of DOFs taken out (private to the engine). The factor
+// itself is a CholeskyFactor (cholesky_factor.h): CHOLMOD's or the GPL-free one, chosen when
+// softshell is configured; everything here and above is the same for both.
 //
 // DOFs are split three ways: `fixed` (prescribed, eliminated), `pinned` (kept out of the factor
 // so that what remains is positive definite even when the fixed DOFs leave rigid-body motions
@@ -16,9 +18,9 @@
 #include "softshell/engine/shell_model.h"
 #include "softshell/result.h"
 
-struct cholmod_factor_struct;
-
 namespace softshell::engine::internal {
+
+class CholeskyFactor;
 
 /// Thrown when K with the chosen DOFs removed is not positive definite (a mechanism the rigid-
 /// mode analysis did not catch); the solver then takes the robust path.
@@ -34,13 +36,13 @@ class Factorization {
   /// FactorizationFailed if that matrix is not positive definite.
   Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
                 const Eigen::MatrixXd& motions);
-  /// The same for another symmetric matrix with K's sparsity pattern (full, both triangles; e.g.
-  /// a tangent stiffness of the nonlinear shell, which carries no exact zero-energy motions, so
-  /// its pin block is kept as computed). With `same_pattern` (a factor of a matrix with this
-  /// pattern and the same fixed and pinned DOFs) its symbolic analysis is reused: only the
-  /// numeric factorization runs.
+  /// The same for another symmetric matrix with K's sparsity pattern (both triangles stored; e.g.
+  /// a tangent stiffness). With `same_pattern` (a factor of a matrix with this pattern and the
+  /// same fixed and pinned DOFs), its ordering and symbolic analysis are reused: only the numeric
+  /// factorization runs (`reused_analysis()`); a factor that does not fit is ignored. `motions` as
+  /// above; without them (empty) the pins' block is kept as computed.
   Factorization(const Eigen::SparseMatrix<double>& k, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
-                const Factorization* same_pattern = nullptr);
+                const Factorization* same_pattern = nullptr, const Eigen::MatrixXd& motions = Eigen::MatrixXd());
   ~Factorization();
   Factorization(const Factorization&) = delete;
   Factorization& operator=(const Factorization&) = delete;
@@ -56,6 +58,8 @@ class Factorization {
   int32_t pin_position(int32_t dof) const { return pin_position_[static_cast<size_t>(dof)]; }
   size_t bytes() const { return bytes_; }
   double factor_ms() const { return factor_ms_; }
+  /// True if the symbolic analysis was taken from `same_pattern`.
+  bool reused_analysis() const { return reused_analysis_; }
 
   /// The pins' part of every solve, computed once: Y_Q = L^-1 P K_aQ (factored x pins) and their
   /// block of the Schur complement, K_QQ - Y_Q^T Y_Q. When the pins carry exact zero-energy
@@ -76,19 +80,13 @@ class Factorization {
   ///
   /// Right-hand sides that are local (a grab touches a few dozen DOFs) make L^-1 P B sparse: it
   /// is nonzero only on the paths from their rows to the root of the elimination tree. The
-  /// forward sweep then visits only those supernodes (on a nested-dissection factor of a surface,
-  /// a small share of it); `fraction_read`, if given, receives the share of the factor read.
+  /// forward sweep then visits only those columns (or supernodes; on a fill-reducing ordering of a
+  /// surface, a small share of the factor); `fraction_read`, if given, receives the share read.
   Eigen::MatrixXd forward(const Eigen::MatrixXd& rhs, double* fraction_read = nullptr) const;
   Eigen::MatrixXd backward(const Eigen::MatrixXd& y) const;
 
  private:
   void factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern);
-  Eigen::MatrixXd apply(int system, const Eigen::MatrixXd& rhs) const;
-  // The forward sweep over the supernodes reachable from the nonzero rows of P B, if that is at
-  // most half of the factor; false (and `x` untouched) otherwise.
-  bool sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read) const;
-
-  void factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern, const Eigen::MatrixXd& motions);
   void compute_pin_block(const Eigen::SparseMatrix<double>& k, const Eigen::MatrixXd& motions);
 
   uint64_t id_ = 0;
@@ -96,13 +94,14 @@ class Factorization {
   Eigen::MatrixXd pin_columns_, pin_block_;
   bool pin_block_zeroed_ = true;
   double pin_motion_residual_ = 0.0;
-  std::vector<int32_t> supernode_of_;  // per factor column, for a supernodal factor
-  cholmod_factor_struct* factor_ = nullptr;
+  std::unique_ptr<const CholeskyFactor> factor_;
+  uint64_t pattern_hash_ = 0;  // of K_aa's upper pattern: a same-pattern factor must match it
+  bool reused_analysis_ = false;
   size_t bytes_ = 0;
   double factor_ms_ = 0.0;
 };
 
-/// A CHOLMOD Cholesky factor of a general sparse symmetric matrix (the zero-mode analysis of the
+/// A sparse Cholesky factor of a general sparse symmetric matrix (the zero-mode analysis of the
 /// scalar surface Gram matrix). Not a failure when the matrix is not positive definite: `ok()`
 /// then says so. Thread-safe once built.
 class SparseCholesky {
@@ -121,7 +120,7 @@ class SparseCholesky {
   Eigen::MatrixXd solve(const Eigen::MatrixXd& b) const;
 
  private:
-  cholmod_factor_struct* factor_ = nullptr;
+  std::unique_ptr<const CholeskyFactor> factor_;
   double min_pivot_ = 0.0;
 };
 

@@ -1,0 +1,294 @@
+// The CHOLMOD implementation of CholeskyFactor (SOFTSHELL_SPARSE_CHOLESKY=cholmod): CHOLMOD's
+// supernodal factor (simplicial when CHOLMOD finds that faster), its BLAS-based solves, and a
+// forward sweep of our own over the supernodes local right-hand sides reach.
+#include "cholesky_factor.h"
+
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+#include <mutex>
+#include <vector>
+
+#include <cholmod.h>
+#include <dlfcn.h>
+
+#include "softshell/result.h"
+
+namespace softshell::engine::internal {
+namespace {
+
+// CHOLMOD keeps its workspace and settings in a cholmod_common; one per thread lets many solves
+// run at once on a shared (read-only) factor.
+struct ThreadCommon {
+  cholmod_common common;
+  ThreadCommon() {
+    cholmod_start(&common);
+    common.print = 0;        // errors are reported through our own messages
+    common.error_handler = nullptr;
+    common.supernodal = CHOLMOD_AUTO;
+    common.final_ll = 1;     // keep L L^T: the solve is two triangular sweeps
+  }
+  ~ThreadCommon() { cholmod_finish(&common); }
+  ThreadCommon(const ThreadCommon&) = delete;
+  ThreadCommon& operator=(const ThreadCommon&) = delete;
+};
+
+cholmod_common* thread_common() {
+  thread_local ThreadCommon common;
+  return &common.common;
+}
+
+// CHOLMOD's supernodal factorization and solves call BLAS. OpenBLAS built without threading
+// (Debian's libopenblas0-serial) keeps global buffers and is not safe to call from several
+// threads at once: concurrent solves then return wrong numbers. Whatever BLAS the system loaded,
+// ask it; if it is such an OpenBLAS, the engine's BLAS-using calls take turns. Reference BLAS and
+// threaded OpenBLAS (libopenblas0-pthread, what build.sh installs) run concurrently.
+//
+// A threaded OpenBLAS is also told to use one thread per call (unless OPENBLAS_NUM_THREADS says
+// otherwise): the service already runs solves in parallel, one per core, and BLAS threads on top
+// would only oversubscribe the cores (measured: 2 concurrent clients got less throughput than 1).
+//
+// The probe runs once, when the engine library is loaded (BLAS is loaded before it, as CHOLMOD's
+// dependency), so no kernel ever calls dlsym or changes BLAS settings.
+struct BlasPolicy {
+  bool thread_unsafe = false;  // calls must take turns
+};
+
+BlasPolicy probe_blas() {
+  using Query = int (*)();
+  auto query = reinterpret_cast<Query>(dlsym(RTLD_DEFAULT, "openblas_get_parallel"));
+  if (query != nullptr && query() != 0 && std::getenv("OPENBLAS_NUM_THREADS") == nullptr) {
+    using SetThreads = void (*)(int);
+    if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(1);
+  }
+  return BlasPolicy{query != nullptr && query() == 0};  // 0 = sequential build
+}
+
+const BlasPolicy g_blas = probe_blas();
+std::mutex g_blas_mutex;
+
+std::unique_lock<std::mutex> blas_turn() {
+  return g_blas.thread_unsafe ? std::unique_lock<std::mutex>(g_blas_mutex) : std::unique_lock<std::mutex>();
+}
+
+// The first column of L whose diagonal entry is NaN or infinite, or -1.
+Eigen::Index first_nonfinite_pivot(const cholmod_factor* l) {
+  const auto* x = static_cast<const double*>(l->x);
+  if (l->is_super) {
+    const auto* super = static_cast<const int*>(l->super);
+    const auto* pi = static_cast<const int*>(l->pi);
+    const auto* px = static_cast<const int*>(l->px);
+    for (size_t s = 0; s < l->nsuper; ++s) {
+      const int ncols = super[s + 1] - super[s], nrows = pi[s + 1] - pi[s];
+      for (int j = 0; j < ncols; ++j) {
+        if (!std::isfinite(x[px[s] + static_cast<ptrdiff_t>(j) * (nrows + 1)])) return super[s] + j;
+      }
+    }
+    return -1;
+  }
+  const auto* p = static_cast<const int*>(l->p);
+  for (size_t j = 0; j < l->n; ++j) {
+    if (!std::isfinite(x[p[j]])) return static_cast<Eigen::Index>(j);
+  }
+  return -1;
+}
+
+}  // namespace
+
+struct CholeskyFactor::State {
+  cholmod_factor* l = nullptr;
+  std::vector<int32_t> supernode_of;  // per factor column, for a supernodal factor
+  ~State() {
+    if (l) cholmod_free_factor(&l, thread_common());
+  }
+
+  // Runs CHOLMOD's solve of `system` (CHOLMOD_L, _Lt, _P, _Pt, _A) on a block of right-hand sides.
+  Eigen::MatrixXd apply(int system, const Eigen::MatrixXd& rhs) const;
+  // The forward sweep over the supernodes reachable from the nonzero rows of P B, if that is at
+  // most half of the factor; false (and `x` untouched) otherwise.
+  bool sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read) const;
+};
+
+CholeskyFactor::CholeskyFactor(std::unique_ptr<State> state) : state_(std::move(state)) {}
+CholeskyFactor::~CholeskyFactor() = default;
+
+const char* CholeskyFactor::backend() { return "CHOLMOD supernodal"; }
+
+std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMatrix<double>& upper,
+                                                          const CholeskyFactor* same_pattern, Failure& failure) {
+  failure = Failure{};
+  // A view of `upper` as a cholmod_sparse (stype 1: the upper triangle is read); CHOLMOD does not
+  // write to its input.
+  cholmod_sparse a;
+  std::memset(&a, 0, sizeof a);
+  a.nrow = a.ncol = static_cast<size_t>(upper.rows());
+  a.nzmax = static_cast<size_t>(upper.nonZeros());
+  a.p = const_cast<int*>(upper.outerIndexPtr());
+  a.i = const_cast<int*>(upper.innerIndexPtr());
+  a.x = const_cast<double*>(upper.valuePtr());
+  a.stype = 1;
+  a.itype = CHOLMOD_INT;
+  a.xtype = CHOLMOD_REAL;
+  a.dtype = CHOLMOD_DOUBLE;
+  a.sorted = 1;
+  a.packed = 1;
+
+  cholmod_common* c = thread_common();
+  cholmod_factor* l = nullptr;
+  bool ok = false;
+  {
+    const auto turn = blas_turn();
+    // A copy of a factor of the same pattern carries its ordering and supernodes: factorizing
+    // into it skips the analysis.
+    l = same_pattern ? cholmod_copy_factor(same_pattern->state_->l, c) : cholmod_analyze(&a, c);
+    ok = l && cholmod_factorize(&a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
+  }
+  // CHOLMOD stops at a pivot that is not positive but passes NaN through (simplicial: NaN <= 0
+  // is false); a non-finite value anywhere in L reaches a later pivot (L_kk^2 = A_kk - sum of
+  // squares of row k), so the pivots tell.
+  if (ok) {
+    const Eigen::Index bad = first_nonfinite_pivot(l);
+    if (bad >= 0) {
+      ok = false;
+      failure.not_finite = true;
+      const auto* perm = static_cast<const int*>(l->Perm);
+      failure.column = perm ? perm[bad] : bad;
+      cholmod_free_factor(&l, c);
+      return nullptr;
+    }
+  }
+  if (!ok) {
+    failure.out_of_memory = c->status == CHOLMOD_OUT_OF_MEMORY;
+    if (l && l->minor < l->n) {
+      const auto* perm = static_cast<const int*>(l->Perm);
+      failure.column = perm ? perm[l->minor] : static_cast<Eigen::Index>(l->minor);
+    }
+    if (l) cholmod_free_factor(&l, c);
+    return nullptr;
+  }
+  auto state = std::make_unique<State>();
+  state->l = l;
+  if (l->is_super) {
+    const auto* super = static_cast<const int*>(l->super);
+    state->supernode_of.resize(l->n);
+    for (size_t s = 0; s < l->nsuper; ++s) {
+      for (int col = super[s]; col < super[s + 1]; ++col) state->supernode_of[static_cast<size_t>(col)] = static_cast<int32_t>(s);
+    }
+  }
+  return std::unique_ptr<CholeskyFactor>(new CholeskyFactor(std::move(state)));
+}
+
+Eigen::Index CholeskyFactor::size() const { return static_cast<Eigen::Index>(state_->l->n); }
+
+size_t CholeskyFactor::bytes() const {
+  const cholmod_factor* l = state_->l;
+  const size_t int_size = sizeof(int);
+  size_t bytes = l->is_super ? l->xsize * sizeof(double) + l->ssize * int_size + (3 * l->nsuper + 3) * int_size
+                             : l->nzmax * (sizeof(double) + int_size);
+  return bytes + 4 * l->n * int_size + state_->supernode_of.size() * sizeof(int32_t);
+}
+
+double CholeskyFactor::min_pivot() const {
+  // The pivots: the squared diagonal of L (supernodal: the diagonal of each supernode's block).
+  const cholmod_factor* l = state_->l;
+  double low = std::numeric_limits<double>::infinity();
+  const auto* x = static_cast<const double*>(l->x);
+  if (l->is_super) {
+    const auto* super = static_cast<const int*>(l->super);
+    const auto* pi = static_cast<const int*>(l->pi);
+    const auto* px = static_cast<const int*>(l->px);
+    for (size_t s = 0; s < l->nsuper; ++s) {
+      const int ncols = super[s + 1] - super[s], nrows = pi[s + 1] - pi[s];
+      for (int j = 0; j < ncols; ++j) low = std::min(low, x[px[s] + static_cast<ptrdiff_t>(j) * (nrows + 1)]);
+    }
+    return low * low;
+  }
+  const auto* p = static_cast<const int*>(l->p);
+  for (size_t j = 0; j < l->n; ++j) low = std::min(low, x[p[j]]);
+  return l->is_ll ? low * low : low;  // LDL^T keeps D on the diagonal
+}
+
+Eigen::MatrixXd CholeskyFactor::State::apply(int system, const Eigen::MatrixXd& rhs) const {
+  if (rhs.cols() == 0) return Eigen::MatrixXd::Zero(rhs.rows(), rhs.cols());
+  cholmod_common* c = thread_common();
+  cholmod_dense b;
+  std::memset(&b, 0, sizeof b);
+  b.nrow = static_cast<size_t>(rhs.rows());
+  b.ncol = static_cast<size_t>(rhs.cols());
+  b.nzmax = b.nrow * b.ncol;
+  b.d = b.nrow;
+  b.x = const_cast<double*>(rhs.data());  // read only
+  b.xtype = CHOLMOD_REAL;
+  b.dtype = CHOLMOD_DOUBLE;
+  cholmod_dense* x = nullptr;
+  {
+    const auto turn = blas_turn();
+    x = cholmod_solve(system, l, &b, c);
+  }
+  if (!x) fail(ErrorCode::kResourceExhausted, "not enough memory for the triangular solves");
+  Eigen::MatrixXd out = Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(x->x), rhs.rows(), rhs.cols());
+  cholmod_free_dense(&x, c);
+  return out;
+}
+
+bool CholeskyFactor::State::sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read) const {
+  if (!l || !l->is_super || l->xtype != CHOLMOD_REAL || l->dtype != CHOLMOD_DOUBLE || rhs.cols() == 0) return false;
+  const auto* super = static_cast<const int*>(l->super);
+  const auto* pi = static_cast<const int*>(l->pi);
+  const auto* px = static_cast<const int*>(l->px);
+  const auto* rows = static_cast<const int*>(l->s);
+  const auto* perm = static_cast<const int*>(l->Perm);
+  const auto* values = static_cast<const double*>(l->x);
+  const auto n = static_cast<Eigen::Index>(l->n);
+  const size_t nsuper = l->nsuper;
+
+  // Which supernodes the sweep reaches: those holding a nonzero row of P B, and every supernode
+  // that one of them updates (its off-diagonal rows), in ascending order (parents come later).
+  std::vector<char> reached(nsuper, 0);
+  for (Eigen::Index k = 0; k < n; ++k) {
+    if (!rhs.row(perm ? perm[k] : k).isZero(0.0)) reached[static_cast<size_t>(supernode_of[static_cast<size_t>(k)])] = 1;
+  }
+  size_t work = 0;
+  for (size_t s = 0; s < nsuper; ++s) {
+    if (!reached[s]) continue;
+    const int ncols = super[s + 1] - super[s];
+    work += static_cast<size_t>(pi[s + 1] - pi[s]) * static_cast<size_t>(ncols);
+    if (2 * work > l->xsize) return false;  // most of the factor: CHOLMOD's BLAS sweep is faster
+    for (int p = pi[s] + ncols; p < pi[s + 1]; ++p) reached[static_cast<size_t>(supernode_of[static_cast<size_t>(rows[p])])] = 1;
+  }
+
+  x.resize(n, rhs.cols());
+  for (Eigen::Index k = 0; k < n; ++k) x.row(k) = rhs.row(perm ? perm[k] : k);
+  Eigen::MatrixXd update;
+  for (size_t s = 0; s < nsuper; ++s) {
+    if (!reached[s]) continue;
+    // Supernode s: columns k1..k1+ncols-1, a column-major nrows x ncols block whose top square is
+    // the lower-triangular diagonal block and whose other rows are listed in `rows`.
+    const int k1 = super[s], ncols = super[s + 1] - k1, nrows = pi[s + 1] - pi[s];
+    const Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> block(values + px[s], nrows, ncols,
+                                                                            Eigen::OuterStride<>(nrows));
+    auto xs = x.middleRows(k1, ncols);
+    if (xs.size() == 0) continue;  // no right-hand sides (an empty triangular solve is UB in Eigen)
+    block.topRows(ncols).triangularView<Eigen::Lower>().solveInPlace(xs);
+    if (nrows == ncols) continue;
+    update.noalias() = block.bottomRows(nrows - ncols) * xs;
+    for (int i = 0; i < nrows - ncols; ++i) x.row(rows[pi[s] + ncols + i]) -= update.row(i);
+  }
+  fraction_read = static_cast<double>(work) / static_cast<double>(l->xsize);
+  return true;
+}
+
+Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* fraction_read) const {
+  Eigen::MatrixXd x;
+  double fraction = 1.0;
+  if (!state_->sparse_forward(rhs, x, fraction)) x = state_->apply(CHOLMOD_L, state_->apply(CHOLMOD_P, rhs));
+  if (fraction_read) *fraction_read = fraction;
+  return x;
+}
+
+Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y) const {
+  return state_->apply(CHOLMOD_Pt, state_->apply(CHOLMOD_Lt, y));
+}
+
+}  // namespace softshell::engine::internal

@@ -1,0 +1,60 @@
+#pragma once
+// The sparse Cholesky factor behind Factorization and SparseCholesky (private to the engine):
+// P A P^T = L L^T of a symmetric positive definite matrix, with the two triangular halves of a
+// solve. Two implementations, chosen when softshell is configured (SOFTSHELL_SPARSE_CHOLESKY):
+//   cholmod  cholesky_cholmod.cpp: CHOLMOD's supernodal factor (BLAS). Debian's libcholmod3
+//            holds CHOLMOD's GPL modules (Supernodal, Modify, MatrixOps), so a binary linking it
+//            carries GPL code.
+//   eigen    cholesky_eigen.cpp: a supernodal left-looking L L^T on Eigen's AMD ordering, written
+//            here (MPL-2.0 Eigen headers only; no BLAS, no SuiteSparse library).
+// Both are thread-safe once built: any number of threads may call forward/backward at once.
+
+#include <cstddef>
+#include <memory>
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+namespace softshell::engine::internal {
+
+class CholeskyFactor {
+ public:
+  /// Why factorize() returned no factor.
+  struct Failure {
+    Eigen::Index column = -1;   ///< first column (in A's numbering) whose pivot was not positive; -1 if unknown
+    bool not_finite = false;    ///< that pivot was NaN or infinite (A holds non-finite values)
+    bool out_of_memory = false;
+  };
+
+  /// Factorizes the symmetric matrix A whose upper triangle `upper` holds (compressed CSC; entries
+  /// below the diagonal are ignored). With `same_pattern` (a factor of a matrix with exactly this
+  /// upper pattern; the caller guarantees it), its ordering and symbolic analysis are reused and
+  /// only the numeric factorization runs. Returns null, and says why in `failure`, if A is not
+  /// positive definite, holds NaN or infinite values (never a factor with NaNs), or memory ran out.
+  static std::unique_ptr<CholeskyFactor> factorize(const Eigen::SparseMatrix<double>& upper,
+                                                   const CholeskyFactor* same_pattern, Failure& failure);
+  ~CholeskyFactor();
+  CholeskyFactor(const CholeskyFactor&) = delete;
+  CholeskyFactor& operator=(const CholeskyFactor&) = delete;
+
+  Eigen::Index size() const;
+  /// L^-1 P B. Right-hand sides that are local make the result sparse: it is nonzero only on the
+  /// elimination-tree paths from their rows to the root, and only that part of L is read (unless
+  /// it is most of L); `fraction_read`, if given, receives the share of L read.
+  Eigen::MatrixXd forward(const Eigen::MatrixXd& rhs, double* fraction_read = nullptr) const;
+  /// P^T L^-T Y.
+  Eigen::MatrixXd backward(const Eigen::MatrixXd& y) const;
+  /// The smallest pivot, min_k L_kk^2.
+  double min_pivot() const;
+  /// Memory held by the factor (bytes), its symbolic part included.
+  size_t bytes() const;
+  /// Which implementation this build has, e.g. "CHOLMOD supernodal" (for benchmarks and reports).
+  static const char* backend();
+
+ private:
+  struct State;
+  explicit CholeskyFactor(std::unique_ptr<State> state);
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace softshell::engine::internal

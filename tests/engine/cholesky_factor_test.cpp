@@ -1,0 +1,291 @@
+// The sparse Cholesky backend this build was configured with (SOFTSHELL_SPARSE_CHOLESKY: CHOLMOD
+// or the GPL-free supernodal one) against a dense Eigen LLT: solves, the split into forward and
+// backward sweeps, local right-hand sides, reuse of a symbolic analysis, and matrices that are not
+// positive definite, which must be reported (the solver's zero-mode and consistency handling rely
+// on it), never answered with NaNs. Run in each backend's build, the same assertions hold both to
+// the same reference.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/SparseCholesky>
+
+#include "cholesky_factor.h"
+#include "factorization.h"
+
+namespace softshell::engine::internal {
+namespace {
+
+using Sparse = Eigen::SparseMatrix<double>;
+
+Sparse upper_of(const Sparse& a) {
+  Sparse u = a.triangularView<Eigen::Upper>();
+  u.makeCompressed();
+  return u;
+}
+
+// A 2D grid Laplacian (nx x ny nodes, 5-point) plus `shift` on the diagonal.
+Sparse grid_laplacian(int nx, int ny, double shift) {
+  std::vector<Eigen::Triplet<double>> t;
+  auto id = [&](int i, int j) { return j * nx + i; };
+  for (int j = 0; j < ny; ++j) {
+    for (int i = 0; i < nx; ++i) {
+      double degree = 0.0;
+      for (auto [di, dj] : {std::pair{1, 0}, std::pair{-1, 0}, std::pair{0, 1}, std::pair{0, -1}}) {
+        const int i2 = i + di, j2 = j + dj;
+        if (i2 < 0 || i2 >= nx || j2 < 0 || j2 >= ny) continue;
+        t.emplace_back(id(i, j), id(i2, j2), -1.0);
+        degree += 1.0;
+      }
+      t.emplace_back(id(i, j), id(i, j), degree + shift);
+    }
+  }
+  Sparse a(nx * ny, nx * ny);
+  a.setFromTriplets(t.begin(), t.end());
+  return a;
+}
+
+// kron(graph, block): three coupled DOFs per node, as in the shell's stiffness; every node's
+// three columns share one structure, so the factor has supernodes of at least three columns.
+Sparse with_blocks(const Sparse& graph, const Eigen::Matrix3d& block) {
+  std::vector<Eigen::Triplet<double>> t;
+  for (Eigen::Index j = 0; j < graph.outerSize(); ++j) {
+    for (Sparse::InnerIterator it(graph, j); it; ++it) {
+      for (int a = 0; a < 3; ++a) {
+        for (int b = 0; b < 3; ++b) {
+          const double v = it.row() == it.col() ? it.value() * block(a, b) : it.value() * (a == b ? 1.0 : 0.1);
+          t.emplace_back(3 * static_cast<int>(it.row()) + a, 3 * static_cast<int>(it.col()) + b, v);
+        }
+      }
+    }
+  }
+  Sparse a(3 * graph.rows(), 3 * graph.cols());
+  a.setFromTriplets(t.begin(), t.end());
+  return a;
+}
+
+// An arrow matrix: a tridiagonal chain plus a dense last row and column (a wide root supernode).
+Sparse arrow(int n) {
+  std::vector<Eigen::Triplet<double>> t;
+  for (int i = 0; i < n; ++i) {
+    t.emplace_back(i, i, 4.0 + 0.01 * i);
+    if (i + 1 < n - 1) {
+      t.emplace_back(i, i + 1, -1.0);
+      t.emplace_back(i + 1, i, -1.0);
+    }
+    if (i < n - 1) {
+      t.emplace_back(i, n - 1, 0.05);
+      t.emplace_back(n - 1, i, 0.05);
+    }
+  }
+  Sparse a(n, n);
+  a.setFromTriplets(t.begin(), t.end());
+  return a;
+}
+
+// A dense SPD matrix (as a sparse one): one supernode, large enough for Eigen's blocked LLT.
+Sparse dense_spd(int n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::MatrixXd m(n, n);
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) m(i, j) = u(rng);
+  }
+  const Eigen::MatrixXd a = m * m.transpose() + n * Eigen::MatrixXd::Identity(n, n);
+  return a.sparseView();
+}
+
+Eigen::MatrixXd random_rhs(Eigen::Index rows, Eigen::Index cols, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::MatrixXd b(rows, cols);
+  for (Eigen::Index j = 0; j < cols; ++j) {
+    for (Eigen::Index i = 0; i < rows; ++i) b(i, j) = u(rng);
+  }
+  return b;
+}
+
+double relative_error(const Eigen::MatrixXd& x, const Eigen::MatrixXd& reference) {
+  return (x - reference).norm() / reference.norm();
+}
+
+std::unique_ptr<CholeskyFactor> factor_of(const Sparse& a, const CholeskyFactor* same_pattern = nullptr) {
+  CholeskyFactor::Failure failure;
+  auto f = CholeskyFactor::factorize(upper_of(a), same_pattern, failure);
+  EXPECT_TRUE(f) << "failed at column " << failure.column;
+  return f;
+}
+
+// Solves, the sweep identities and the pivots against the dense factorization of `a`.
+void expect_matches_dense(const Sparse& a, const char* what) {
+  SCOPED_TRACE(what);
+  const auto f = factor_of(a);
+  ASSERT_TRUE(f);
+  ASSERT_EQ(f->size(), a.rows());
+  const Eigen::MatrixXd dense = a;
+  const Eigen::LLT<Eigen::MatrixXd> llt(dense);
+  ASSERT_EQ(llt.info(), Eigen::Success);
+  // Condition numbers here are below 1e4: 1e-11 is round-off, not a loose tolerance.
+  for (Eigen::Index cols : {1, 4}) {
+    const Eigen::MatrixXd b = random_rhs(a.rows(), cols, 7u + static_cast<unsigned>(cols));
+    const Eigen::MatrixXd y = f->forward(b);
+    EXPECT_TRUE(y.allFinite());
+    EXPECT_LT(relative_error(f->backward(y), llt.solve(b)), 1e-11) << cols << " right-hand sides";
+    // forward(B)^T forward(B) = B^T A^-1 B, whatever the ordering.
+    EXPECT_LT(relative_error(y.transpose() * y, b.transpose() * llt.solve(b)), 1e-11);
+  }
+  // min L_kk^2: positive, and at most A's smallest diagonal entry (L_kk^2 <= A_kk in any order).
+  EXPECT_GT(f->min_pivot(), 0.0);
+  EXPECT_LE(f->min_pivot(), dense.diagonal().minCoeff() * (1.0 + 1e-12));
+  EXPECT_GT(f->bytes(), 0u);
+}
+
+TEST(CholeskyFactor, BackendIsNamed) {
+  ASSERT_NE(CholeskyFactor::backend(), nullptr);
+  EXPECT_GT(std::string(CholeskyFactor::backend()).size(), 0u);
+  RecordProperty("backend", CholeskyFactor::backend());
+}
+
+TEST(CholeskyFactor, MatchesDenseLltOnSmallSpdMatrices) {
+  Sparse one(1, 1);
+  one.insert(0, 0) = 2.5;
+  expect_matches_dense(one, "1 x 1");
+  Sparse diagonal(5, 5);
+  for (int i = 0; i < 5; ++i) diagonal.insert(i, i) = 1.0 + i;
+  expect_matches_dense(diagonal, "diagonal");
+  expect_matches_dense(grid_laplacian(9, 7, 0.1), "grid Laplacian");
+  Eigen::Matrix3d block;
+  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  expect_matches_dense(with_blocks(grid_laplacian(8, 6, 0.2), block), "3 DOFs per node (supernodes)");
+  expect_matches_dense(arrow(60), "arrow (dense root)");
+  expect_matches_dense(dense_spd(150, 3), "dense 150 x 150 (one supernode, blocked LLT)");
+}
+
+TEST(CholeskyFactor, LocalRightHandSideSweepsPartOfTheFactor) {
+  Eigen::Matrix3d block;
+  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const Sparse a = with_blocks(grid_laplacian(30, 30, 0.05), block);
+  const auto f = factor_of(a);
+  ASSERT_TRUE(f);
+  Eigen::MatrixXd b = Eigen::MatrixXd::Zero(a.rows(), 2);
+  b(3 * 17 + 1, 0) = 1.0;  // one node near a corner: few elimination-tree paths
+  b(3 * 17 + 2, 1) = -0.5;
+  b(3 * 18, 1) = 2.0;
+  double fraction = 0.0;
+  const Eigen::MatrixXd y = f->forward(b, &fraction);
+  EXPECT_GT(fraction, 0.0);
+  RecordProperty("fraction_read", std::to_string(fraction));
+  EXPECT_LT(fraction, 0.5);  // a nested-dissection-like ordering of a grid: a local load reaches a small share
+  // Large enough for CHOLMOD to choose its supernodal factor: the reference is Eigen's sparse
+  // simplicial LLT rather than a dense one.
+  const Eigen::SimplicialLLT<Sparse> reference(a);
+  ASSERT_EQ(reference.info(), Eigen::Success);
+  const Eigen::MatrixXd x = reference.solve(b);
+  EXPECT_LT(relative_error(f->backward(y), x), 1e-11);
+  EXPECT_LT(relative_error(y.transpose() * y, b.transpose() * x), 1e-11);
+}
+
+TEST(CholeskyFactor, ReusesTheAnalysisForAnotherMatrixOfThePattern) {
+  Eigen::Matrix3d block;
+  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const Sparse a = with_blocks(grid_laplacian(10, 8, 0.2), block);
+  Sparse a2 = a;  // same pattern, other values (a tangent stiffness beside K)
+  for (Eigen::Index j = 0; j < a2.outerSize(); ++j) {
+    for (Sparse::InnerIterator it(a2, j); it; ++it) {
+      if (it.row() == it.col()) it.valueRef() *= 1.5;
+    }
+  }
+  const auto first = factor_of(a);
+  ASSERT_TRUE(first);
+  const auto second = factor_of(a2, first.get());
+  ASSERT_TRUE(second);
+  const Eigen::MatrixXd b = random_rhs(a.rows(), 3, 11);
+  const Eigen::MatrixXd dense2 = a2;
+  EXPECT_LT(relative_error(second->backward(second->forward(b)), Eigen::LLT<Eigen::MatrixXd>(dense2).solve(b)), 1e-11);
+  const Eigen::MatrixXd dense = a;  // and the first factor is untouched
+  EXPECT_LT(relative_error(first->backward(first->forward(b)), Eigen::LLT<Eigen::MatrixXd>(dense).solve(b)), 1e-11);
+}
+
+// Expects factorize() to refuse `a`, name a column in range and say whether A held non-finite
+// values.
+void expect_refused(const Sparse& a, const char* what, bool not_finite = false, Eigen::Index expected_column = -1) {
+  SCOPED_TRACE(what);
+  CholeskyFactor::Failure failure;
+  const auto f = CholeskyFactor::factorize(upper_of(a), nullptr, failure);
+  EXPECT_FALSE(f);
+  EXPECT_FALSE(failure.out_of_memory);
+  EXPECT_EQ(failure.not_finite, not_finite);
+  EXPECT_GE(failure.column, 0);
+  EXPECT_LT(failure.column, a.rows());
+  if (expected_column >= 0) {
+    EXPECT_EQ(failure.column, expected_column);
+  }
+}
+
+TEST(CholeskyFactor, ReportsMatricesThatAreNotPositiveDefinite) {
+  Sparse diagonal(6, 6);
+  for (int i = 0; i < 6; ++i) diagonal.insert(i, i) = i == 4 ? -1.0 : 1.0 + i;
+  expect_refused(diagonal, "one negative diagonal entry", false, 4);
+  // A grid Laplacian shifted below zero: smallest eigenvalue -0.05, every diagonal entry positive.
+  expect_refused(grid_laplacian(9, 7, -0.05), "indefinite grid Laplacian");
+  Eigen::Matrix3d block;
+  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  Sparse blocks = with_blocks(grid_laplacian(8, 6, 0.2), block);
+  // One node's 3x3 block made indefinite (eigenvalues 3 and -1 in the first two DOFs).
+  blocks.coeffRef(3 * 20, 3 * 20) = 1.0;
+  blocks.coeffRef(3 * 20 + 1, 3 * 20 + 1) = 1.0;
+  blocks.coeffRef(3 * 20, 3 * 20 + 1) = 2.0;
+  blocks.coeffRef(3 * 20 + 1, 3 * 20) = 2.0;
+  expect_refused(blocks, "an indefinite block inside a supernode");
+  // A dense matrix whose failing pivot lies past Eigen's first LLT block.
+  Sparse dense = dense_spd(150, 5);
+  Eigen::MatrixXd d = dense;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(d);
+  const Eigen::VectorXd v = eig.eigenvectors().col(0);
+  d -= (eig.eigenvalues()[0] + 1.0) * v * v.transpose();  // smallest eigenvalue now -1
+  expect_refused(d.sparseView(), "dense, one negative eigenvalue");
+  // Non-finite input is refused, not propagated.
+  Sparse nan = grid_laplacian(5, 5, 0.1);
+  nan.coeffRef(7, 7) = std::numeric_limits<double>::quiet_NaN();
+  expect_refused(nan, "NaN on the diagonal", true);
+  Sparse nan_off = grid_laplacian(5, 5, 0.1);
+  nan_off.coeffRef(7, 8) = nan_off.coeffRef(8, 7) = std::numeric_limits<double>::quiet_NaN();
+  expect_refused(nan_off, "NaN off the diagonal", true);
+}
+
+// The engine's wrappers: SparseCholesky says !ok(); Factorization throws FactorizationFailed
+// naming the control point and axis of the failing pivot.
+TEST(CholeskyFactor, WrappersReportIndefiniteMatrices) {
+  Sparse diagonal(9, 9);
+  for (int i = 0; i < 9; ++i) diagonal.insert(i, i) = i == 5 ? -2.0 : 1.0;
+  const SparseCholesky zero_modes(diagonal);
+  EXPECT_FALSE(zero_modes.ok());
+  EXPECT_EQ(zero_modes.min_pivot(), 0.0);
+  const SparseCholesky fine(grid_laplacian(4, 4, 0.5));
+  ASSERT_TRUE(fine.ok());
+  EXPECT_GT(fine.min_pivot(), 0.0);
+  try {
+    const Factorization f(diagonal, {0}, {});  // DOF 5 is factor column 4
+    FAIL() << "an indefinite matrix was factorized";
+  } catch (const FactorizationFailed& e) {
+    EXPECT_NE(std::string(e.what()).find("not positive definite"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("control point 1, axis z"), std::string::npos) << e.what();
+  }
+  Sparse nan = grid_laplacian(4, 4, 0.5);
+  nan.coeffRef(3, 3) = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(SparseCholesky(nan).ok());
+  try {
+    const Factorization f(nan, {}, {});
+    FAIL() << "a matrix with an infinite entry was factorized";
+  } catch (const FactorizationFailed& e) {
+    EXPECT_NE(std::string(e.what()).find("NaN or infinite"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace softshell::engine::internal
