@@ -14,31 +14,7 @@
 #include "softshell/softshell_c.h"
 #include "softshell/softshell_embedded_c.h"
 
-static int g_failures = 0;
-static int g_checks = 0;
-
-#define CHECK(cond)                                                                                    \
-  do {                                                                                                 \
-    ++g_checks;                                                                                        \
-    if (!(cond)) {                                                                                     \
-      fprintf(stderr, "%s:%d: CHECK failed: %s (last error: %s)\n", __FILE__, __LINE__, #cond,          \
-              ss_last_error_message());                                                                \
-      ++g_failures;                                                                                    \
-    }                                                                                                  \
-  } while (0)
-
-#define CHECK_STATUS(expr, expected)                                                                   \
-  do {                                                                                                 \
-    ++g_checks;                                                                                        \
-    ss_status s_ = (expr);                                                                             \
-    if (s_ != (expected)) {                                                                            \
-      fprintf(stderr, "%s:%d: %s returned %s, expected %s (%s)\n", __FILE__, __LINE__, #expr,           \
-              ss_status_name(s_), ss_status_name(expected), ss_last_error_message());                  \
-      ++g_failures;                                                                                    \
-    }                                                                                                  \
-  } while (0)
-
-#define CHECK_OK(expr) CHECK_STATUS(expr, SS_OK)
+#include "c_check.h"
 
 /* The layout P/Invoke and other bindings see (bindings/csharp/Softshell.cs): fixed-size fields. */
 _Static_assert(sizeof(ss_embedded_options) == 80, "ss_embedded_options is 80 bytes");

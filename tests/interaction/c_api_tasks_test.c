@@ -16,19 +16,7 @@
 #include "softshell/softshell_c.h"
 #include "softshell/softshell_embedded_c.h"
 
-static int g_failures = 0;
-static int g_checks = 0;
-
-#define CHECK(cond)                                                                                    \
-  do {                                                                                                 \
-    ++g_checks;                                                                                        \
-    if (!(cond)) {                                                                                     \
-      fprintf(stderr, "%s:%d: CHECK failed: %s (last error: %s)\n", __FILE__, __LINE__, #cond,          \
-              ss_last_error_message());                                                                \
-      ++g_failures;                                                                                    \
-    }                                                                                                  \
-  } while (0)
-#define CHECK_OK(expr) CHECK((expr) == SS_OK)
+#include "c_check.h"
 
 /* ---- a host job system: a fixed pool of pthreads over a linked queue ---- */
 

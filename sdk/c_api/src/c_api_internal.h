@@ -56,6 +56,42 @@ struct HoldPutObject {
   bool ready() const { return future.wait_for(std::chrono::seconds(0)) == std::future_status::ready; }
 };
 
+/// Asynchronous operations destroyed while running: kept (with their session) until they finish,
+/// so that destroying one never blocks (the last reference to a session would wait for its
+/// requests) and no request is abandoned mid-flight. Failures nobody read are logged as
+/// "<what(op)> destroyed before it was read failed: ...". One per operation kind, never destroyed
+/// (orphans may still finish during exit).
+void log(int32_t level, std::string_view message) noexcept;  // (below)
+
+template <class Operation>
+class Reaper {
+ public:
+  using Describe = std::string (*)(const Operation&);
+  explicit Reaper(Describe what) : what_(what) {}
+  void adopt(const Operation& op) {
+    std::lock_guard lock(mutex_);
+    purge();
+    orphans_.push_back(op);
+  }
+  void purge_finished() {
+    std::lock_guard lock(mutex_);
+    purge();
+  }
+
+ private:
+  void purge() {
+    std::erase_if(orphans_, [this](const Operation& o) {
+      if (!o.ready()) return false;
+      const auto& r = o.future.get();
+      if (!r.ok()) c_api::log(SS_LOG_WARNING, what_(o) + " destroyed before it was read failed: " + r.error().message);
+      return true;
+    });
+  }
+  Describe what_;
+  std::mutex mutex_;
+  std::vector<Operation> orphans_;
+};
+
 /// A subscription, and a result taken from it that did not fit the caller's buffer yet.
 struct SubscriptionObject {
   std::shared_ptr<Session> session;  // (destroyed after the subscription)

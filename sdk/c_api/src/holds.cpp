@@ -21,39 +21,8 @@ std::string hold_id_arg(const char* hold_id) {
   return std::string(hold_id, strnlen(hold_id, kMaxHoldIdLength + 1));  // the session checks the characters
 }
 
-// Puts destroyed while running: kept (with their session) until they finish, so that
-// `ss_hold_put_destroy` never blocks (the last reference to a session would wait for its
-// requests). Failures nobody read are logged.
-class PutReaper {
- public:
-  void adopt(const HoldPutObject& op) {
-    std::lock_guard lock(mutex_);
-    purge();
-    orphans_.push_back(op);
-  }
-  void purge_finished() {
-    std::lock_guard lock(mutex_);
-    purge();
-  }
-
- private:
-  void purge() {
-    std::erase_if(orphans_, [](const HoldPutObject& o) {
-      if (!o.ready()) return false;
-      const auto& r = o.future.get();
-      if (!r.ok()) {
-        c_api::log(SS_LOG_WARNING, "a put of hold '" + o.hold_id + "' destroyed before it was read failed: " +
-                                       r.error().message);
-      }
-      return true;
-    });
-  }
-  std::mutex mutex_;
-  std::vector<HoldPutObject> orphans_;
-};
-
-PutReaper& reaper() {
-  static auto* r = new PutReaper;  // never destroyed: orphans may still finish during exit
+Reaper<HoldPutObject>& reaper() {
+  static auto* r = new Reaper<HoldPutObject>([](const HoldPutObject& o) { return "a put of hold '" + o.hold_id + "'"; });
   return *r;
 }
 

@@ -25,38 +25,8 @@ ss_stress_sample stress_to_c(const StressSample& sample) {
                           sample.von_mises_top,        sample.von_mises_bottom};
 }
 
-// Operations destroyed while running: kept (with their session) until they finish, so that
-// `ss_deformation_destroy` never blocks (the last reference to a session would wait for its
-// requests) and no request is abandoned mid-flight. Failures nobody read are logged.
-class Reaper {
- public:
-  void adopt(const DeformationObject& op) {
-    std::lock_guard lock(mutex_);
-    purge();
-    orphans_.push_back(op);
-  }
-  void purge_finished() {
-    std::lock_guard lock(mutex_);
-    purge();
-  }
-
- private:
-  void purge() {
-    std::erase_if(orphans_, [](const DeformationObject& o) {
-      if (!o.ready()) return false;
-      const auto& r = o.future.get();
-      if (!r.ok()) {
-        c_api::log(SS_LOG_WARNING, "a deformation destroyed before it was read failed: " + r.error().message);
-      }
-      return true;
-    });
-  }
-  std::mutex mutex_;
-  std::vector<DeformationObject> orphans_;
-};
-
-Reaper& reaper() {
-  static auto* r = new Reaper;  // never destroyed: orphans may still finish during exit
+Reaper<DeformationObject>& reaper() {
+  static auto* r = new Reaper<DeformationObject>([](const DeformationObject&) { return std::string("a deformation"); });
   return *r;
 }
 

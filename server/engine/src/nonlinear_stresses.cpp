@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "kirchhoff_love.h"
+#include "stress_scan.h"
 
 namespace softshell::engine {
 namespace {
@@ -109,21 +110,10 @@ NonlinearStressSample evaluate_nonlinear_stress(const ShellModel& model, const E
 NonlinearStressSummary nonlinear_max_stress(const ShellModel& model, const Eigen::VectorXd& displacement,
                                             double yield_strength) {
   check_size(model, displacement);
-  std::map<std::pair<int32_t, int32_t>, std::vector<std::array<double, 2>>> groups;
-  for (const QuadraturePoint& q : model.quadrature()) groups[{q.point.face, q.point.subface}].push_back({q.point.u, q.point.v});
   NonlinearStressSummary summary;
-  std::vector<NonlinearStressSample> samples;
-  bool first = true;
-  for (const auto& [key, uvs] : groups) {
-    samples.clear();
-    face_stresses(model, displacement, key.first, key.second, uvs, samples);
-    for (const NonlinearStressSample& s : samples) {
-      if (first || s.von_mises() > summary.max.von_mises()) {
-        summary.max = s;
-        first = false;
-      }
-    }
-  }
+  summary.max = internal::max_von_mises_at_quadrature_points<NonlinearStressSample>(
+      model, [&](int32_t face, int32_t subface, const std::vector<std::array<double, 2>>& uvs,
+                 std::vector<NonlinearStressSample>& out) { face_stresses(model, displacement, face, subface, uvs, out); });
   summary.exceeds_yield = summary.max.von_mises() > yield_strength;
   return summary;
 }

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "kirchhoff_love.h"
+#include "stress_scan.h"
 
 namespace softshell::engine {
 namespace {
@@ -110,22 +111,11 @@ std::vector<StressSample> evaluate_stresses(const ShellModel& model, const Eigen
 
 StressSummary max_stress(const ShellModel& model, const Eigen::VectorXd& displacement, double yield_strength) {
   check_size(model, displacement);
-  // Group the quadrature points by (face, sub-face) so each face's basis is set up once.
-  std::map<std::pair<int32_t, int32_t>, std::vector<std::array<double, 2>>> groups;
-  for (const QuadraturePoint& q : model.quadrature()) groups[{q.point.face, q.point.subface}].push_back({q.point.u, q.point.v});
   StressSummary summary;
-  std::vector<StressSample> samples;
-  bool first = true;
-  for (const auto& [key, uvs] : groups) {
-    samples.clear();
-    face_stresses(model, displacement, key.first, key.second, uvs, samples);
-    for (const StressSample& s : samples) {
-      if (first || s.von_mises() > summary.max.von_mises()) {
-        summary.max = s;
-        first = false;
-      }
-    }
-  }
+  summary.max = internal::max_von_mises_at_quadrature_points<StressSample>(
+      model, [&](int32_t face, int32_t subface, const std::vector<std::array<double, 2>>& uvs, std::vector<StressSample>& out) {
+        face_stresses(model, displacement, face, subface, uvs, out);
+      });
   summary.exceeds_yield = summary.max.von_mises() > yield_strength;
   return summary;
 }
