@@ -72,8 +72,10 @@ std::unique_lock<std::mutex> blas_turn() {
   return g_blas.thread_unsafe ? std::unique_lock<std::mutex>(g_blas_mutex) : std::unique_lock<std::mutex>();
 }
 
-// The first column of L whose diagonal entry is NaN or infinite, or -1.
-Eigen::Index first_nonfinite_pivot(const cholmod_factor* l) {
+// Calls visit(column, diagonal entry of L) for every column until it returns true; the column
+// where it did, or -1. (Supernodal: the diagonal of each supernode's dense block.)
+template <class Visit>
+Eigen::Index find_on_diagonal(const cholmod_factor* l, Visit&& visit) {
   const auto* x = static_cast<const double*>(l->x);
   if (l->is_super) {
     const auto* super = static_cast<const int*>(l->super);
@@ -82,16 +84,21 @@ Eigen::Index first_nonfinite_pivot(const cholmod_factor* l) {
     for (size_t s = 0; s < l->nsuper; ++s) {
       const int ncols = super[s + 1] - super[s], nrows = pi[s + 1] - pi[s];
       for (int j = 0; j < ncols; ++j) {
-        if (!std::isfinite(x[px[s] + static_cast<ptrdiff_t>(j) * (nrows + 1)])) return super[s] + j;
+        if (visit(super[s] + j, x[px[s] + static_cast<ptrdiff_t>(j) * (nrows + 1)])) return super[s] + j;
       }
     }
     return -1;
   }
   const auto* p = static_cast<const int*>(l->p);
   for (size_t j = 0; j < l->n; ++j) {
-    if (!std::isfinite(x[p[j]])) return static_cast<Eigen::Index>(j);
+    if (visit(static_cast<Eigen::Index>(j), x[p[j]])) return static_cast<Eigen::Index>(j);
   }
   return -1;
+}
+
+// The first column of L whose diagonal entry is NaN or infinite, or -1.
+Eigen::Index first_nonfinite_pivot(const cholmod_factor* l) {
+  return find_on_diagonal(l, [](Eigen::Index, double d) { return !std::isfinite(d); });
 }
 
 }  // namespace
@@ -190,23 +197,14 @@ size_t CholeskyFactor::bytes() const {
 }
 
 double CholeskyFactor::min_pivot() const {
-  // The pivots: the squared diagonal of L (supernodal: the diagonal of each supernode's block).
+  // The pivots: the squared diagonal of L (LDL^T keeps D itself on the diagonal).
   const cholmod_factor* l = state_->l;
   double low = std::numeric_limits<double>::infinity();
-  const auto* x = static_cast<const double*>(l->x);
-  if (l->is_super) {
-    const auto* super = static_cast<const int*>(l->super);
-    const auto* pi = static_cast<const int*>(l->pi);
-    const auto* px = static_cast<const int*>(l->px);
-    for (size_t s = 0; s < l->nsuper; ++s) {
-      const int ncols = super[s + 1] - super[s], nrows = pi[s + 1] - pi[s];
-      for (int j = 0; j < ncols; ++j) low = std::min(low, x[px[s] + static_cast<ptrdiff_t>(j) * (nrows + 1)]);
-    }
-    return low * low;
-  }
-  const auto* p = static_cast<const int*>(l->p);
-  for (size_t j = 0; j < l->n; ++j) low = std::min(low, x[p[j]]);
-  return l->is_ll ? low * low : low;  // LDL^T keeps D on the diagonal
+  find_on_diagonal(l, [&](Eigen::Index, double d) {
+    low = std::min(low, d);
+    return false;
+  });
+  return (l->is_super || l->is_ll) ? low * low : low;
 }
 
 Eigen::MatrixXd CholeskyFactor::State::apply(int system, const Eigen::MatrixXd& rhs) const {

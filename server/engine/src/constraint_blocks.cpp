@@ -23,15 +23,7 @@ void solve_lower_in_place(const Lower& l, Rhs&& b) {
   l.template triangularView<Eigen::Lower>().solveInPlace(b);
 }
 
-uint64_t mix(uint64_t h, uint64_t x) {
-  x += 0x9e3779b97f4a7c15ULL + (h << 6) + (h >> 2);
-  x ^= x >> 30;
-  x *= 0xbf58476d1ce4e5b9ULL;
-  x ^= x >> 27;
-  x *= 0x94d049bb133111ebULL;
-  x ^= x >> 31;
-  return h ^ x;
-}
+uint64_t mix(uint64_t h, uint64_t x) { return hash_mix(h, x); }
 
 // The columns C^T of rows on the factored DOFs (dense: factor rows x rows; skipped if null) and
 // their coefficients on the pins (pins x rows).
@@ -56,7 +48,6 @@ void row_columns(const Factorization& factor, const std::vector<Terms>& rows, Ei
 
 }  // namespace
 
-uint64_t hash_mix(uint64_t h, uint64_t x) { return mix(h, x); }
 
 uint64_t hash_terms(const Terms& terms) {
   uint64_t h = 0x243f6a8885a308d3ULL ^ terms.size();

@@ -20,6 +20,7 @@
 #include <Eigen/QR>
 
 #include "factorization.h"
+#include "hash_mix.h"
 
 namespace softshell::engine::internal {
 
@@ -28,9 +29,6 @@ using Terms = std::vector<std::pair<int32_t, double>>;
 
 /// A 64-bit hash of a row's coefficients (the DOFs and the bits of the values).
 uint64_t hash_terms(const Terms& terms);
-/// Mixes `x` into the hash `h`.
-uint64_t hash_mix(uint64_t h, uint64_t x);
-
 /// Columns of Y, stored on the factor rows where any of them is non-zero (the forward sweep of a
 /// local right-hand side reaches only the elimination-tree paths from its DOFs).
 struct SweptColumns {

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "cholesky_factor.h"
+#include "hash_mix.h"
 
 namespace softshell::engine::internal {
 namespace {
@@ -16,20 +17,10 @@ std::atomic<uint64_t> g_next_factor_id{1};
 // a few hundred terms, with margin).
 constexpr double kZeroEnergyResidual = 1e-11;
 
-uint64_t mix(uint64_t h, uint64_t x) {  // splitmix64 of x, folded into h
-  x += 0x9e3779b97f4a7c15ULL + (h << 6) + (h >> 2);
-  x ^= x >> 30;
-  x *= 0xbf58476d1ce4e5b9ULL;
-  x ^= x >> 27;
-  x *= 0x94d049bb133111ebULL;
-  x ^= x >> 31;
-  return h ^ x;
-}
-
 uint64_t pattern_hash(const Eigen::SparseMatrix<double>& a) {
-  uint64_t h = mix(0x243f6a8885a308d3ULL, static_cast<uint64_t>(a.cols()));
-  for (Eigen::Index j = 0; j <= a.cols(); ++j) h = mix(h, static_cast<uint64_t>(a.outerIndexPtr()[j]));
-  for (Eigen::Index p = 0; p < a.nonZeros(); ++p) h = mix(h, static_cast<uint64_t>(a.innerIndexPtr()[p]));
+  uint64_t h = hash_mix(0x243f6a8885a308d3ULL, static_cast<uint64_t>(a.cols()));
+  for (Eigen::Index j = 0; j <= a.cols(); ++j) h = hash_mix(h, static_cast<uint64_t>(a.outerIndexPtr()[j]));
+  for (Eigen::Index p = 0; p < a.nonZeros(); ++p) h = hash_mix(h, static_cast<uint64_t>(a.innerIndexPtr()[p]));
   return h;
 }
 
