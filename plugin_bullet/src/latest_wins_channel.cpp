@@ -36,6 +36,7 @@ Result<HeldResult> LatestWinsChannel::release(std::chrono::milliseconds timeout)
   (void)wait(timeout);
   held_ = false;
   pending_.reset();
+  accepted_.reset();
   return session_->release_hold(geometry_, hold_->hold_id);
 }
 
@@ -61,9 +62,9 @@ void LatestWinsChannel::send(DeformationRequest request, Clock::time_point now) 
 // The same contents again once a third of the lease has passed, so that two more tries fit
 // before it lapses. Not rate limited: the server answers a renewal without a solve.
 void LatestWinsChannel::renew_if_due(Clock::time_point now) {
-  if (!hold_ || !held_ || in_flight() || has_pending() || !last_sent_) return;
+  if (!hold_ || !held_ || in_flight() || has_pending() || !accepted_) return;
   if (now < *last_send_time_ + hold_->ttl / 3) return;
-  hold_in_flight_ = session_->put_hold_async(geometry_, hold_->hold_id, *last_sent_, hold_->ttl);
+  hold_in_flight_ = session_->put_hold_async(geometry_, hold_->hold_id, *accepted_, hold_->ttl);
   renewing_ = true;
   last_send_time_ = now;
   ++stats_.renewals;
@@ -89,6 +90,7 @@ std::optional<ChannelAnswer> LatestWinsChannel::poll(Clock::time_point now) {
   if (ready(in_flight_)) outcome.emplace(ChannelAnswer{*last_sent_, in_flight_.get(), std::nullopt});
   if (ready(hold_in_flight_)) {
     Result<HeldResult> held = hold_in_flight_.get();
+    if (held && !renewing_) accepted_ = *last_sent_;
     if (held) {
       outcome.emplace(ChannelAnswer{*last_sent_, std::move(held->result), std::move(held->holds)});
     } else {

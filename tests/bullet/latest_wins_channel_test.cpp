@@ -118,6 +118,22 @@ TEST(LatestWinsChannel, AsAHoldRenewsItsLeaseAndLetsGo) {
   EXPECT_EQ(channel->stats().sent, 1u);
   const HoldDetail held = session->hold(id, "pins").value();
   EXPECT_EQ(held.info.version, 1u);  // renewals are no new versions
+  // A refused change: the hold keeps its contents, and the renewals keep those alive (not the
+  // refused ones, which would lapse the hold after its 300 ms).
+  DeformationRequest bad = pinned;
+  bad.forces.push_back({9999, Vec3::UnitZ()});
+  channel->submit(bad);
+  ASSERT_TRUE(channel->wait(10s));
+  answer = channel->poll();
+  ASSERT_TRUE(answer && !answer->result.ok());
+  const uint64_t renewals = channel->stats().renewals;
+  const auto later = Clock::now() + 700ms;
+  while (Clock::now() < later) {
+    (void)channel->poll();
+    std::this_thread::sleep_for(5ms);
+  }
+  EXPECT_GT(channel->stats().renewals, renewals);
+  EXPECT_EQ(session->hold(id, "pins").value().info.version, 1u);
   // A change is the next version; destroying the channel releases the hold.
   DeformationRequest pushed = pinned;
   pushed.forces.push_back({test::grid_index(4, 2, 4), Vec3(0.0, 0.0, -1.0)});

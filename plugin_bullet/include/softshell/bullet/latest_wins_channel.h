@@ -53,8 +53,9 @@ struct ChannelAnswer {
 /// is done and the rate limit allows.
 ///
 /// As a hold (`HoldTarget`), each request is a `put_hold_async` of the hold's new contents, and
-/// `poll` renews the lease (puts the last contents again: no new version, no solve) once a third
-/// of the `ttl` passed without a put, so the hold lives as long as the channel is polled.
+/// `poll` renews the lease (puts the last contents the server accepted again: no new version, no
+/// solve) once a third of the `ttl` passed without a put, so the hold lives as long as the channel
+/// is polled (a refused change is not sent again by a renewal).
 /// `release` (and the destructor) lets go of it.
 ///
 /// Ownership: shares the session. Destroying a channel of requests does not cancel a request in
@@ -124,6 +125,7 @@ class LatestWinsChannel {
   std::future<Result<HeldResult>> hold_in_flight_;
   std::optional<DeformationRequest> pending_;
   std::optional<DeformationRequest> last_sent_;
+  std::optional<DeformationRequest> accepted_;  // a hold's contents the server accepted last
   std::optional<Clock::time_point> last_send_time_;
   ChannelStats stats_;
 };
