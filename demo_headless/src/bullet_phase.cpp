@@ -190,7 +190,8 @@ BulletPhaseResult run_bullet_world(const std::shared_ptr<Session>& session, cons
   // The demo steps Bullet faster than real time, so the wall-clock rate limit (made for a game
   // loop at 60 Hz) would let only a few requests through.
   settings.max_request_rate = 0.0;
-  settings.supports = setup.supports;
+  settings.supports = setup.supports;  // the bridge's floor hold
+  settings.holds.name = setup.holds_name;
   const bullet::ShellId shell = bridge.add_shell(session, id, mesh, settings).value();
 
   // The ground under everything, so boxes that slide off still land.
@@ -208,13 +209,15 @@ BulletPhaseResult run_bullet_world(const std::shared_ptr<Session>& session, cons
   uint32_t shown = 0;
   const auto loop_start = std::chrono::steady_clock::now();
   for (int step = 0; step < setup.steps; ++step) {
-    std::this_thread::sleep_until(loop_start + step * std::chrono::microseconds(4167));
+    std::this_thread::sleep_until(loop_start + step * std::chrono::duration<double, std::milli>(setup.step_ms));
     world.stepSimulation(1.0f / 60.0f, 1, 1.0f / 60.0f);
     out.contacts += bridge.update().contacts;
     if (const uint32_t res_id = bridge.stats(shell).res_id; res_id != shown) on_result(shown = res_id, bridge.control_positions(shell));
+    if (setup.each_step) setup.each_step(shown, bridge.stats(shell).shown_holds);
   }
   (void)bridge.wait_idle(std::chrono::seconds(10));
   bridge.update();
+  if (setup.before_release) setup.before_release();
   const bullet::ShellStats stats = bridge.stats(shell);
   if (stats.res_id != shown) on_result(stats.res_id, bridge.control_positions(shell));
   out.requests = static_cast<int>(stats.channel.sent);
@@ -239,23 +242,28 @@ BulletPhaseResult run_bullet_world(const std::shared_ptr<Session>& session, cons
   return out;
 }
 
-void bullet_phase(Context& c) {
-  const std::string phase = "Bullet";
+BulletSetup bullet_setup(const Context& c) {
   BulletSetup setup;
   setup.half = 0.03 * c.stage.size;
-  const std::vector<int32_t> spots = landing_spots(c, setup.half);
-  if (spots.empty()) {
-    c.report.notes.push_back("Bullet: no flat spot on top of the object for a box to rest on; no boxes dropped");
-    return;
-  }
-  for (int32_t spot : spots) setup.spots.push_back(c.view->rest_vertices[static_cast<size_t>(spot)]);
-  setup.masses = box_masses(c, spots, phase);
-  c.report.loads.box_masses = setup.masses;
+  for (int32_t spot : landing_spots(c, setup.half)) setup.spots.push_back(c.view->rest_vertices[static_cast<size_t>(spot)]);
   setup.supports = c.stage.supports;
   setup.up = c.stage.up;
   setup.floor_height = c.stage.floor_height;
   setup.level = std::max(1, c.options.level - 1);
   setup.steps = c.options.short_script ? std::min(c.options.bullet_steps, 60) : c.options.bullet_steps;
+  return setup;
+}
+
+void bullet_phase(Context& c) {
+  const std::string phase = "Bullet";
+  BulletSetup setup = bullet_setup(c);
+  const std::vector<int32_t> spots = landing_spots(c, setup.half);
+  if (spots.empty()) {
+    c.report.notes.push_back("Bullet: no flat spot on top of the object for a box to rest on; no boxes dropped");
+    return;
+  }
+  setup.masses = box_masses(c, spots, phase);
+  c.report.loads.box_masses = setup.masses;
   c.say("dropping " + std::to_string(spots.size()) + (spots.size() == 1 ? " box" : " boxes") + " on the object (Bullet)");
   auto& r = c.report.bullet;
   // Every result the bridge shows joins the range checks (the boxes land, bounce and settle),

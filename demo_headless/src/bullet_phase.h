@@ -6,9 +6,11 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "softshell/deformation.h"
+#include "softshell/hold.h"
 #include "softshell/session.h"
 
 namespace softshell::demo {
@@ -25,6 +27,12 @@ struct BulletSetup {
   double half = 0.05;            ///< half edge of the boxes (m)
   int level = 2;                 ///< collision mesh tessellation level
   int steps = 240;               ///< Bullet steps of 1/60 s
+  std::string holds_name;        ///< prefix of the bridge's hold ids ("" = a random one)
+  double step_ms = 4.167;        ///< wall-clock time per step (4.167: four times real time)
+  /// Called after every step with the result the bridge shows and its hold versions.
+  std::function<void(uint32_t res_id, const HoldVersions& holds)> each_step;
+  /// Called once the steps are done and the bridge is idle, while its holds still live.
+  std::function<void()> before_release;
 };
 
 struct BulletPhaseResult {
@@ -46,6 +54,10 @@ using OnResult = std::function<void(uint32_t res_id, const std::vector<Vec3>& po
 /// Runs the Bullet world on the shell `id` (uploaded from `mesh`).
 BulletPhaseResult run_bullet_world(const std::shared_ptr<Session>& session, const GeomId& id, const ControlMesh& mesh,
                                    const BulletSetup& setup, const OnResult& on_result);
+
+/// Flat spots on top of the object where boxes can land (rest surface points; empty if none)
+/// and the boxes' half edge: `setup.spots`, `setup.half`, `up`, the floor and the level.
+BulletSetup bullet_setup(const Context& c);
 
 /// The phase in the script: picks flat spots on top, chooses masses that dent the shell inside
 /// the linear model's range (from a probe), runs the world, and records what happened.

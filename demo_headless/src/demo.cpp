@@ -9,6 +9,7 @@
 
 #include "bullet_phase.h"
 #include "context.h"
+#include "multi_user.h"
 #include "pictures.h"
 #include "script.h"
 #include "softshell/embedded_session.h"
@@ -164,6 +165,7 @@ Result<DemoReport> run_demo(const DemoOptions& options) {
     if (options.deformations < 10 && !options.short_script) {
       fail(ErrorCode::kInvalidArgument, "--deformations must be at least 10");
     }
+    if (options.users != 1 && options.users != 2) fail(ErrorCode::kInvalidArgument, "--users is 1 or 2");
     if (!(options.load_scale > 0.0) || !std::isfinite(options.load_scale)) {
       fail(ErrorCode::kInvalidArgument, "--load-scale must be a positive number");
     }
@@ -190,6 +192,7 @@ Result<DemoReport> run_demo(const DemoOptions& options) {
     const std::optional<StressField> stresses = final_state(c, stress_level);
     report.warnings = c.range.warnings(c.stage.size, options.material, c.yield, options.material_name);
     if (options.pictures) write_pictures(c, follower.get(), stresses, stress_level);
+    if (options.users == 2) multi_user_phase(c);
     return report;
   });
 }

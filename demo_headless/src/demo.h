@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "softshell/hold.h"
 #include "softshell/material.h"
 #include "softshell/result.h"
 
@@ -29,6 +30,9 @@ struct DemoOptions {
   /// on purpose, and the report then warns).
   double load_scale = 1.0;
   bool follower = true;                  ///< run the second client
+  /// 2 adds the shared phase: two users' hands (each its own hold) and the Bullet bridge's holds
+  /// on one object at once, followed by a third client through the event stream (1 or 2).
+  int users = 1;
   bool bullet = true;                    ///< drop rigid bodies through the Bullet bridge
   int bullet_steps = 240;                ///< Bullet steps at 1/60 s
   bool pictures = true;                  ///< write PNGs
@@ -84,6 +88,25 @@ struct DemoReport {
     int requests = 0;
     double max_deflection = 0.0;         ///< metres, limit surface
   } bullet;
+  /// The shared phase (`users` = 2): holds of several clients on one object.
+  struct MultiUser {
+    bool ran = false;
+    int users = 0;
+    std::vector<int> updates;            ///< hold updates answered, per user
+    double update_p50_ms = 0.0, update_p95_ms = 0.0;  ///< from HoldLease::update to the answer including it
+    int solves = 0;                      ///< hold-state results stored during the phase
+    int solves_measured = 0;             ///< of which seen right after their predecessor (merges counted)
+    double merged_mean = 0.0;            ///< new hold versions per solve, over those measured
+    int merged_max = 0;
+    int bodies = 0, on_shell = 0;        ///< boxes, and those resting on the shell at the end
+    int follower_received = 0;           ///< events the third client took
+    double follower_lag_p50_ms = 0.0, follower_lag_max_ms = 0.0;  ///< behind the first client in this process to see a result
+    uint32_t final_res_id = 0;           ///< the newest hold-state result at the end
+    HoldVersions final_holds;            ///< the hold versions it includes
+    bool includes_every_user = false;    ///< final_holds has each user's last version
+    bool follower_matches = false;       ///< the follower ended on final_res_id, same positions
+    std::string error;                   ///< why the phase could not finish ("" = it did)
+  } multi_user;
   /// The final state (two hands pulling).
   struct Final {
     double max_displacement = 0.0;       ///< m, limit surface

@@ -62,6 +62,9 @@ void add_options(CLI::App& app, Args& a) {
   app.add_option("--load-scale", a.demo.load_scale,
                  "multiplies the loads the script chose to stay inside the linear range\n(default 1; above about 2 the results leave it, and the demo warns)")
       ->type_name("F")->check(CLI::PositiveNumber.description(""));
+  app.add_option("--users", a.demo.users,
+                 "2 adds a shared phase: two users' hands (each its own hold) and the Bullet\nboxes on one object at once, a third client following the events (default 1)")
+      ->type_name("N")->check(CLI::Range(1, 2).description(""));
   app.add_flag("--no-bullet", a.no_bullet, "skip the Bullet boxes");
   app.add_flag("--no-follower", a.no_follower, "skip the second client");
   app.add_flag("--no-pictures", a.no_pictures, "skip the PNGs");
@@ -136,5 +139,6 @@ int main(int argc, char** argv) {
   for (const auto& w : report->warnings) std::cerr << "softshell-demo: warning: " << w << "\n";
   std::cout << softshell::demo::format_summary(*report);
   if (a.json) std::cout << softshell::demo::format_json(*report) << "\n";
-  return report->follower.matches_master || !a.demo.follower ? 0 : 1;
+  const bool shared_ok = !report->multi_user.ran || report->multi_user.error.empty();
+  return (report->follower.matches_master || !a.demo.follower) && shared_ok ? 0 : 1;
 }

@@ -29,6 +29,12 @@ nlohmann::json optional_number(const std::optional<double>& v) {
   return v && std::isfinite(*v) ? nlohmann::json(*v) : nlohmann::json(nullptr);
 }
 
+nlohmann::json holds_json(const HoldVersions& holds) {
+  nlohmann::json out = nlohmann::json::object();
+  for (const auto& [id, version] : holds) out[id] = version;
+  return out;
+}
+
 }  // namespace
 
 std::string format_summary(const DemoReport& r) {
@@ -66,6 +72,21 @@ std::string format_summary(const DemoReport& r) {
       << length(r.bullet.max_deflection) << "\n";
   } else {
     s << "no boxes\n";
+  }
+  if (r.multi_user.ran) {
+    const auto& m = r.multi_user;
+    s << "  shared (2 users)     ";
+    if (!m.error.empty()) s << "FAILED: " << m.error << "\n                       ";
+    s << "hold updates " << (m.updates.size() == 2 ? std::to_string(m.updates[0]) + " + " + std::to_string(m.updates[1]) : "0")
+      << ", answered p50 " << format("%.2f", m.update_p50_ms) << " ms, p95 " << format("%.2f", m.update_p95_ms) << " ms; "
+      << m.bodies << (m.bodies == 1 ? " box" : " boxes") << " (" << m.on_shell << " on the shell) and the floor as holds\n"
+      << "                       " << m.solves << " solves, " << format("%.2f", m.merged_mean) << " new hold versions per solve (max "
+      << m.merged_max << ", over " << m.solves_measured << " seen in sequence)\n"
+      << "                       follower (events) took " << m.follower_received << ", lag p50 " << format("%.2f", m.follower_lag_p50_ms)
+      << " ms, max " << format("%.2f", m.follower_lag_max_ms) << " ms; final result " << m.final_res_id
+      << (m.follower_matches ? " = follower's" : " (the follower DIFFERS)") << ", holds";
+    for (const auto& [id, v] : m.final_holds) s << " " << id << "@" << v;
+    s << (m.includes_every_user ? " (both users' last versions)" : " (MISSING a user's last version)") << "\n";
   }
   s << "  final state          max |u| " << length(r.final.max_displacement) << ", max rotation "
     << format("%.2g deg", r.final.max_rotation * 180.0 / 3.14159265358979) << ", max von Mises ";
@@ -108,6 +129,16 @@ std::string format_json(const DemoReport& r) {
       {"bullet",
        {{"ran", r.bullet.ran}, {"bodies", r.bullet.bodies}, {"on_shell", r.bullet.on_shell}, {"contacts", r.bullet.contacts},
         {"requests", r.bullet.requests}, {"max_deflection", r.bullet.max_deflection}}},
+      {"multi_user",
+       {{"ran", r.multi_user.ran}, {"users", r.multi_user.users}, {"updates", r.multi_user.updates},
+        {"update_latency_ms", {{"p50", r.multi_user.update_p50_ms}, {"p95", r.multi_user.update_p95_ms}}},
+        {"solves", r.multi_user.solves}, {"solves_measured", r.multi_user.solves_measured},
+        {"merged_per_solve", {{"mean", r.multi_user.merged_mean}, {"max", r.multi_user.merged_max}}},
+        {"bodies", r.multi_user.bodies}, {"on_shell", r.multi_user.on_shell},
+        {"follower", {{"received", r.multi_user.follower_received}, {"lag_ms", {{"p50", r.multi_user.follower_lag_p50_ms}, {"max", r.multi_user.follower_lag_max_ms}}}}},
+        {"final_res_id", r.multi_user.final_res_id}, {"final_holds", holds_json(r.multi_user.final_holds)},
+        {"includes_every_user", r.multi_user.includes_every_user}, {"follower_matches", r.multi_user.follower_matches},
+        {"error", r.multi_user.error}}},
       {"final",
        {{"max_displacement", r.final.max_displacement}, {"max_von_mises", optional_number(r.final.max_von_mises)},
         {"max_rotation", r.final.max_rotation}, {"max_strain", optional_number(r.final.max_strain)},

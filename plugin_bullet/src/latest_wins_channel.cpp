@@ -16,7 +16,29 @@ LatestWinsChannel::LatestWinsChannel(std::shared_ptr<Session> session, GeomId ge
   }
 }
 
-LatestWinsChannel::~LatestWinsChannel() = default;
+LatestWinsChannel::LatestWinsChannel(std::shared_ptr<Session> session, GeomId geometry, HoldTarget hold,
+                                     double max_rate)
+    : LatestWinsChannel(std::move(session), geometry, max_rate) {
+  if (hold.ttl.count() <= 0 || hold.ttl > std::chrono::seconds(600)) {
+    fail(ErrorCode::kInvalidArgument, "a hold's ttl must be more than 0 and at most 600 s");
+  }
+  hold_ = std::move(hold);
+}
+
+LatestWinsChannel::~LatestWinsChannel() {
+  if (hold_ && held_) (void)release();
+}
+
+Result<HeldResult> LatestWinsChannel::release(std::chrono::milliseconds timeout) {
+  if (!hold_) return Error{ErrorCode::kInvalidArgument, "this channel sends requests, not a hold"};
+  if (!held_) return Error{ErrorCode::kNotFound, "the hold '" + hold_->hold_id + "' was not put (or was released)"};
+  // A put still in flight would bring the hold back after the release: wait for it first.
+  (void)wait(timeout);
+  held_ = false;
+  pending_.reset();
+  accepted_.reset();
+  return session_->release_hold(geometry_, hold_->hold_id);
+}
 
 LatestWinsChannel::Clock::time_point LatestWinsChannel::next_send_time() const {
   return last_send_time_ ? *last_send_time_ + min_interval_ : Clock::time_point::min();
@@ -25,10 +47,27 @@ LatestWinsChannel::Clock::time_point LatestWinsChannel::next_send_time() const {
 void LatestWinsChannel::note_depth() { stats_.max_depth = std::max(stats_.max_depth, depth()); }
 
 void LatestWinsChannel::send(DeformationRequest request, Clock::time_point now) {
-  in_flight_ = session_->deform_async(geometry_, request);
+  if (hold_) {
+    hold_in_flight_ = session_->put_hold_async(geometry_, hold_->hold_id, request, hold_->ttl);
+    held_ = true;
+    renewing_ = false;
+  } else {
+    in_flight_ = session_->deform_async(geometry_, request);
+  }
   last_sent_ = std::move(request);
   last_send_time_ = now;
   ++stats_.sent;
+}
+
+// The same contents again once a third of the lease has passed, so that two more tries fit
+// before it lapses. Not rate limited: the server answers a renewal without a solve.
+void LatestWinsChannel::renew_if_due(Clock::time_point now) {
+  if (!hold_ || !held_ || in_flight() || has_pending() || !accepted_) return;
+  if (now < *last_send_time_ + hold_->ttl / 3) return;
+  hold_in_flight_ = session_->put_hold_async(geometry_, hold_->hold_id, *accepted_, hold_->ttl);
+  renewing_ = true;
+  last_send_time_ = now;
+  ++stats_.renewals;
 }
 
 void LatestWinsChannel::submit(DeformationRequest request, Clock::time_point now) {
@@ -44,9 +83,23 @@ void LatestWinsChannel::submit(DeformationRequest request, Clock::time_point now
 
 std::optional<ChannelAnswer> LatestWinsChannel::poll(Clock::time_point now) {
   std::optional<ChannelAnswer> outcome;
-  if (in_flight() && in_flight_.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
-    // get() leaves the future invalid: nothing in flight.
-    outcome.emplace(ChannelAnswer{*last_sent_, in_flight_.get()});
+  const auto ready = [](const auto& future) {
+    return future.valid() && future.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
+  };
+  // get() leaves the future invalid: nothing in flight.
+  if (ready(in_flight_)) outcome.emplace(ChannelAnswer{*last_sent_, in_flight_.get(), std::nullopt});
+  if (ready(hold_in_flight_)) {
+    Result<HeldResult> held = hold_in_flight_.get();
+    if (held && !renewing_) accepted_ = *last_sent_;
+    if (held) {
+      outcome.emplace(ChannelAnswer{*last_sent_, std::move(held->result), std::move(held->holds)});
+    } else {
+      outcome.emplace(ChannelAnswer{*last_sent_, held.error(), std::nullopt});
+    }
+    if (renewing_ && held) outcome.reset();  // a renewal answers with a result seen before
+    renewing_ = false;
+  }
+  if (outcome) {
     if (outcome->result.ok()) {
       ++stats_.completed;
     } else {
@@ -58,12 +111,14 @@ std::optional<ChannelAnswer> LatestWinsChannel::poll(Clock::time_point now) {
     pending_.reset();
     send(std::move(request), now);
   }
+  renew_if_due(now);
   return outcome;
 }
 
 bool LatestWinsChannel::wait(std::chrono::milliseconds timeout) const {
-  if (!in_flight()) return true;
-  return in_flight_.wait_for(timeout) == std::future_status::ready;
+  if (in_flight_.valid()) return in_flight_.wait_for(timeout) == std::future_status::ready;
+  if (hold_in_flight_.valid()) return hold_in_flight_.wait_for(timeout) == std::future_status::ready;
+  return true;
 }
 
 }  // namespace softshell::bullet

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 #include <thread>
 #include <mutex>
@@ -15,6 +16,8 @@
 #include <BulletDynamics/Dynamics/btRigidBody.h>
 
 #include "softshell/bullet/force_accumulator.h"
+#include "shell_settings.h"
+#include "softshell/hold_lease.h"
 
 namespace softshell::bullet {
 
@@ -33,51 +36,38 @@ Eigen::Isometry3d to_isometry(const btTransform& t) {
   return out;
 }
 
-void check_settings(const ShellSettings& s) {
-  const auto& c = s.contacts;
-  if (!std::isfinite(s.response_time) || s.response_time < 0.0) {
-    fail(ErrorCode::kInvalidArgument, "response time must be finite and >= 0 (s)");
-  }
-  if (std::isnan(c.contact_threshold)) fail(ErrorCode::kInvalidArgument, "contact threshold is NaN");
-  if (!std::isfinite(c.min_force) || c.min_force < 0.0) {
-    fail(ErrorCode::kInvalidArgument, "minimum contact force must be finite and >= 0 (N)");
-  }
-  if (!std::isfinite(c.force_scale) || c.force_scale <= 0.0) {
-    fail(ErrorCode::kInvalidArgument, "force scale must be finite and > 0");
-  }
-  if (!std::isfinite(s.max_request_rate) || s.max_request_rate < 0.0) {
-    fail(ErrorCode::kInvalidArgument, "max request rate must be finite and >= 0 (requests per second; 0 = unlimited)");
-  }
-  if (!std::isfinite(s.min_relative_change) || s.min_relative_change < 0.0) {
-    fail(ErrorCode::kInvalidArgument, "min relative change must be finite and >= 0");
-  }
-  if (!std::isfinite(s.friction) || s.friction < 0.0) fail(ErrorCode::kInvalidArgument, "friction must be >= 0");
-  if (!std::isfinite(s.restitution) || s.restitution < 0.0 || s.restitution > 1.0) {
-    fail(ErrorCode::kInvalidArgument, "restitution must be in [0, 1]");
-  }
-  const btTransform& t = s.transform;
-  for (int r = 0; r < 3; ++r) {
-    if (!std::isfinite(t.getOrigin()[r]) || !std::isfinite(t.getBasis()[r].x()) ||
-        !std::isfinite(t.getBasis()[r].y()) || !std::isfinite(t.getBasis()[r].z())) {
-      fail(ErrorCode::kInvalidArgument, "shell transform is not finite");
-    }
-  }
+LatestWinsChannel make_channel(std::shared_ptr<Session> session, const GeomId& geometry, const ShellSettings& s,
+                               const std::string& contacts_hold) {
+  if (!s.holds.enabled) return LatestWinsChannel(std::move(session), geometry, s.max_request_rate);
+  return LatestWinsChannel(std::move(session), geometry, HoldTarget{contacts_hold, s.holds.ttl}, s.max_request_rate);
 }
 
 }  // namespace
 
 struct ShellBridge::Shell {
   Shell(std::shared_ptr<Session> session, const GeomId& geometry, const ShellSettings& shell_settings,
-        LimitEvaluator evaluator, std::unique_ptr<CollisionMesh> collision_mesh)
+        LimitEvaluator evaluator, std::unique_ptr<CollisionMesh> collision_mesh, const std::string& hold_name)
       : settings(shell_settings),
+        floor_hold_id(hold_name.empty() ? "" : hold_name + ".floor"),
+        contacts_hold_id(hold_name.empty() ? "" : hold_name + ".contacts"),
         mesh(std::move(collision_mesh)),
-        channel(std::move(session), geometry, shell_settings.max_request_rate),
+        channel(make_channel(std::move(session), geometry, shell_settings, contacts_hold_id)),
         frame(evaluator),
         smoothed(evaluator),
         submitted(evaluator),
         rest(evaluator.mesh().positions()) {}
 
+  // Lets go of the holds: contacts first, so the state never keeps loads without the supports.
+  ~Shell() {
+    events.reset();
+    if (channel.hold()) (void)channel.release();
+    floor_lease.reset();
+  }
+  Shell(const Shell&) = delete;
+  Shell& operator=(const Shell&) = delete;
+
   ShellSettings settings;
+  std::string floor_hold_id, contacts_hold_id;  // "" without holds
   std::unique_ptr<CollisionMesh> mesh;
   btCollisionObject object;
   LatestWinsChannel channel;
@@ -88,14 +78,20 @@ struct ShellBridge::Shell {
   double mass = 0.0;             // heaviest dynamic body of the last frame with contacts (kg)
   double max_point_force = 0.0;  // largest control-point force of the last frame with contacts (N)
   std::vector<Vec3> rest;        // rest control points
-  DeformationRequest base;       // supports + floor constraints
+  DeformationRequest base;       // supports + floor constraints (without holds: sent with every request)
   DeformationRequest floor;      // the floor's constraints
   std::vector<ContactForce> contacts;
   ShellStats stats;
+  // With holds: the floor hold kept alive, the object's results, the newest result id handed to
+  // the mesh (queued or shown), so that answers and events never move it back.
+  std::unique_ptr<HoldLease> floor_lease;
+  std::unique_ptr<EventSubscription> events;
+  uint32_t newest = 0;
 
   // Background mesh update, guarded by ShellBridge::mutex_: a result waiting for the worker
   // (latest wins), the worker preparing the hidden shape, a prepared shape waiting for commit.
   std::optional<DeformationResult> queued;
+  HoldVersions queued_holds, preparing_holds, ready_holds;
   bool preparing = false;
   bool ready = false;
   uint32_t ready_res_id = 0;
@@ -115,6 +111,7 @@ ShellBridge::~ShellBridge() {
   for (auto& slot : slots_) {
     if (slot) world_.removeCollisionObject(&slot->object);
   }
+  slots_.clear();  // releases the holds
 }
 
 Result<ShellId> ShellBridge::add_shell(std::shared_ptr<Session> session, const GeomId& geometry,
@@ -127,8 +124,11 @@ Result<ShellId> ShellBridge::add_shell(std::shared_ptr<Session> session, const G
     auto collision_mesh = CollisionMesh::create(*evaluator, settings.mesh);
     if (!collision_mesh) throw Exception(collision_mesh.error());
 
+    const std::string hold_name =
+        !settings.holds.enabled ? "" : settings.holds.name.empty() ? random_hold_name() : settings.holds.name;
+    Session& client = *session;
     auto shell = std::make_unique<Shell>(std::move(session), geometry, settings, *evaluator,
-                                         std::move(*collision_mesh));
+                                         std::move(*collision_mesh), hold_name);
     // Supports: the app's constraints and loads, then the floor.
     shell->base = settings.supports;
     if (settings.floor.enabled) {
@@ -139,6 +139,20 @@ Result<ShellId> ShellBridge::add_shell(std::shared_ptr<Session> session, const G
       append(shell->base.vertex_constraints, shell->floor.vertex_constraints);
       append(shell->base.lagrange_constraints, shell->floor.lagrange_constraints);
       append(shell->base.limit_constraints, shell->floor.limit_constraints);
+    }
+    if (settings.holds.enabled) {
+      // The floor hold first (blocking, once: its refusal is this call's error), then a lease that
+      // renews it; then the object's results, the newest at once.
+      if (!shell->base.empty()) {
+        auto put = client.put_hold(geometry, shell->floor_hold_id, shell->base, settings.holds.ttl);
+        if (!put) throw Exception(put.error());
+        HoldLeaseOptions lease;
+        lease.ttl = settings.holds.ttl;
+        shell->floor_lease = std::make_unique<HoldLease>(client, geometry, shell->floor_hold_id, shell->base, lease);
+      }
+      auto events = client.subscribe(geometry);
+      if (!events) throw Exception(events.error());
+      shell->events = std::move(*events);
     }
 
     // The static collision object.
@@ -246,6 +260,7 @@ void ShellBridge::work() {
     }
     DeformationResult result = std::move(*job->queued);
     job->queued.reset();
+    job->preparing_holds = std::move(job->queued_holds);
     job->preparing = true;
     lock.unlock();
 
@@ -256,15 +271,17 @@ void ShellBridge::work() {
     job->preparing = false;
     job->ready = prepared.ok();
     job->ready_res_id = result.res_id;
+    job->ready_holds = std::move(job->preparing_holds);
     if (!prepared.ok()) job->prepare_error = prepared.error();
     done_.notify_all();
   }
 }
 
-void ShellBridge::show(Shell& shell, uint32_t res_id, UpdateReport& report) {
+void ShellBridge::show(Shell& shell, uint32_t res_id, HoldVersions holds, UpdateReport& report) {
   // The collision object now uses the other shape of the double buffer.
   shell.object.setCollisionShape(&shell.mesh->shape());
   shell.stats.res_id = res_id;
+  shell.stats.shown_holds = std::move(holds);
   ++shell.stats.results_applied;
   ++report.results_applied;
   world_.updateSingleAabb(&shell.object);
@@ -318,12 +335,19 @@ void ShellBridge::receive(Shell& shell, ChannelAnswer& answer, UpdateReport& rep
     shell.stats.compliance = std::max(0.0, virtual_work) / total.squaredNorm();
   }
   shell.stats.last_error.reset();
+  // With holds, the object's events may have brought this result (or a newer one) already.
+  if (shell.settings.holds.enabled && result.res_id <= shell.newest) return;
+  apply(shell, std::move(result), answer.holds.value_or(HoldVersions{}), report);
+}
 
+void ShellBridge::apply(Shell& shell, DeformationResult result, HoldVersions holds, UpdateReport& report) {
+  shell.newest = std::max(shell.newest, result.res_id);
   if (shell.settings.background_mesh_update) {
     // Hand the positions to the task (replacing a result it has not started on).
     {
       std::lock_guard lock(mutex_);
       shell.queued = std::move(result);
+      shell.queued_holds = std::move(holds);
     }
     start_work();
     return;
@@ -334,11 +358,34 @@ void ShellBridge::receive(Shell& shell, ChannelAnswer& answer, UpdateReport& rep
     ++report.errors;
     return;
   }
-  show(shell, result.res_id, report);
+  show(shell, result.res_id, std::move(holds), report);
+}
+
+// The object's newest hold-state result, whoever changed the holds. Results of requests solved
+// alone (no hold versions) are not the state this shell takes part in and are left out.
+void ShellBridge::follow_events(Shell& shell, UpdateReport& report) {
+  if (!shell.events) return;
+  std::optional<HeldResult> event = shell.events->poll();
+  if (!event && shell.events->state() == FeedState::kFailed) {
+    shell.stats.last_error = shell.events->error();
+    ++report.errors;
+    shell.events.reset();  // the answers to the bridge's own puts still move the mesh
+    return;
+  }
+  if (!event || !event->holds || event->result.res_id <= shell.newest) return;
+  if (event->result.positions.size() != shell.rest.size()) {
+    shell.stats.last_error = Error{ErrorCode::kInternal, "an event brought " + std::to_string(event->result.positions.size()) +
+                                                             " positions for a mesh of " + std::to_string(shell.rest.size())};
+    ++report.errors;
+    return;
+  }
+  ++shell.stats.results_from_events;
+  apply(shell, std::move(event->result), std::move(*event->holds), report);
 }
 
 void ShellBridge::commit_prepared(Shell& shell, UpdateReport& report) {
   std::optional<uint32_t> res_id;
+  HoldVersions holds;
   {
     std::lock_guard lock(mutex_);
     if (shell.prepare_error) {
@@ -349,11 +396,12 @@ void ShellBridge::commit_prepared(Shell& shell, UpdateReport& report) {
     if (shell.ready && !shell.preparing && shell.mesh->commit()) {
       shell.ready = false;
       res_id = shell.ready_res_id;
+      holds = std::move(shell.ready_holds);
     }
   }
   if (res_id) {
     start_work();  // a result queued meanwhile can be prepared now
-    show(shell, *res_id, report);
+    show(shell, *res_id, std::move(holds), report);
   }
 }
 
@@ -441,7 +489,8 @@ UpdateReport ShellBridge::update() {
     if (unchanged) {
       ++shell.stats.unchanged_frames;
     } else {
-      DeformationRequest request = shell.base;
+      // With holds the supports and the floor are a hold of their own: only the forces change.
+      DeformationRequest request = shell.settings.holds.enabled ? DeformationRequest{} : shell.base;
       shell.smoothed.append_to(request.forces);
       shell.channel.submit(std::move(request), now);
       shell.submitted.assign(shell.smoothed);
@@ -452,6 +501,7 @@ UpdateReport ShellBridge::update() {
     // Results that arrived; the pending request goes out when the rate allows. Shapes the worker
     // has prepared go live.
     if (auto answer = shell.channel.poll(now)) receive(shell, *answer, report);
+    follow_events(shell, report);
     if (shell.settings.background_mesh_update) commit_prepared(shell, report);
     shell.stats.channel = shell.channel.stats();
   }
@@ -468,6 +518,7 @@ Result<void> ShellBridge::wait_idle(std::chrono::milliseconds timeout) {
       Shell& shell = *slot;
       const auto now = LatestWinsChannel::Clock::now();
       if (auto answer = shell.channel.poll(now)) receive(shell, *answer, report);
+      follow_events(shell, report);
       commit_prepared(shell, report);
       shell.stats.channel = shell.channel.stats();
       if (shell.channel.depth() > 0 || busy(shell)) idle = false;
@@ -500,6 +551,8 @@ const std::vector<Vec3>& ShellBridge::control_positions(ShellId shell) const {
 }
 const std::vector<ContactForce>& ShellBridge::contacts(ShellId shell) const { return get(shell).contacts; }
 const DeformationRequest& ShellBridge::floor(ShellId shell) const { return get(shell).floor; }
+const std::string& ShellBridge::floor_hold_id(ShellId shell) const { return get(shell).floor_hold_id; }
+const std::string& ShellBridge::contacts_hold_id(ShellId shell) const { return get(shell).contacts_hold_id; }
 const DeformationRequest* ShellBridge::last_sent_request(ShellId shell) const {
   return get(shell).channel.last_sent();
 }

@@ -97,6 +97,7 @@ Row run(const ControlMesh& mesh, int level, int bodies, bool results, bool backg
   settings.max_request_rate = 0.0;
   settings.min_relative_change = 0.0;  // submit every step
   settings.background_mesh_update = background;
+  settings.holds.enabled = false;  // the bridge's own cost, against a test double without holds
   auto bridge = std::make_unique<bullet::ShellBridge>(world);
   const bullet::ShellId shell = bridge->add_shell(session, GeomId{}, mesh, settings).value();
   const Tessellation& t = bridge->collision_mesh(shell).tessellation();  // valid while `bridge` is

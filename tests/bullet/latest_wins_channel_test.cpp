@@ -1,7 +1,10 @@
 #include "softshell/bullet/latest_wins_channel.h"
 
+#include <thread>
+
 #include <gtest/gtest.h>
 
+#include "softshell/embedded_session.h"
 #include "test_meshes.h"
 #include "test_sessions.h"
 
@@ -83,6 +86,64 @@ TEST(LatestWinsChannel, RejectsBadArguments) {
   EXPECT_THROW(LatestWinsChannel(nullptr, GeomId{}, 0.0), Exception);
   EXPECT_THROW(LatestWinsChannel(session, GeomId{}, -1.0), Exception);
   EXPECT_THROW(LatestWinsChannel(session, GeomId{}, std::nan("")), Exception);
+  EXPECT_THROW(LatestWinsChannel(session, GeomId{}, HoldTarget{"h", 0ms}), Exception);
+  EXPECT_THROW(LatestWinsChannel(session, GeomId{}, HoldTarget{"h", 601s}), Exception);
+  LatestWinsChannel requests(session, GeomId{});
+  EXPECT_EQ(requests.release().error().code, ErrorCode::kInvalidArgument);
+}
+
+// As a hold: each request a new version, the lease renewed from poll() (a 300 ms lease outlives
+// a second of polling), and released by release() or the destructor.
+TEST(LatestWinsChannel, AsAHoldRenewsItsLeaseAndLetsGo) {
+  auto session = std::make_shared<EmbeddedSession>();
+  const GeomId id = session->upload(test::make_grid(4, 4), Material{2.0e9, 0.35, 0.005, 1200.0}).value().id;
+  DeformationRequest pinned;
+  for (int j = 0; j <= 1; ++j) {  // two rows clamp the edge
+    for (int i = 0; i <= 4; ++i) pinned.vertex_constraints.push_back({test::grid_index(4, i, j), kAxisAll, Vec3::Zero()});
+  }
+  auto channel = std::make_unique<LatestWinsChannel>(session, id, HoldTarget{"pins", 300ms});
+  EXPECT_EQ(channel->release().error().code, ErrorCode::kNotFound);  // never put
+  channel->submit(pinned);
+  ASSERT_TRUE(channel->wait(10s));
+  auto answer = channel->poll();
+  ASSERT_TRUE(answer && answer->result.ok()) << (answer ? answer->result.error().message : "no answer");
+  ASSERT_TRUE(answer->holds);
+  EXPECT_EQ(*answer->holds, (HoldVersions{{"pins", 1}}));
+  const auto until = Clock::now() + 1s;
+  while (Clock::now() < until) {
+    EXPECT_FALSE(channel->poll());  // renewals bring no new answers
+    std::this_thread::sleep_for(5ms);
+  }
+  EXPECT_GE(channel->stats().renewals, 3u);
+  EXPECT_EQ(channel->stats().sent, 1u);
+  const HoldDetail held = session->hold(id, "pins").value();
+  EXPECT_EQ(held.info.version, 1u);  // renewals are no new versions
+  // A refused change: the hold keeps its contents, and the renewals keep those alive (not the
+  // refused ones, which would lapse the hold after its 300 ms).
+  DeformationRequest bad = pinned;
+  bad.forces.push_back({9999, Vec3::UnitZ()});
+  channel->submit(bad);
+  ASSERT_TRUE(channel->wait(10s));
+  answer = channel->poll();
+  ASSERT_TRUE(answer && !answer->result.ok());
+  const uint64_t renewals = channel->stats().renewals;
+  const auto later = Clock::now() + 700ms;
+  while (Clock::now() < later) {
+    (void)channel->poll();
+    std::this_thread::sleep_for(5ms);
+  }
+  EXPECT_GT(channel->stats().renewals, renewals);
+  EXPECT_EQ(session->hold(id, "pins").value().info.version, 1u);
+  // A change is the next version; destroying the channel releases the hold.
+  DeformationRequest pushed = pinned;
+  pushed.forces.push_back({test::grid_index(4, 2, 4), Vec3(0.0, 0.0, -1.0)});
+  channel->submit(pushed);
+  ASSERT_TRUE(channel->wait(10s));
+  answer = channel->poll();
+  ASSERT_TRUE(answer && answer->result.ok());
+  EXPECT_EQ(*answer->holds, (HoldVersions{{"pins", 2}}));
+  channel.reset();
+  EXPECT_EQ(session->hold(id, "pins").error().code, ErrorCode::kNotFound);
 }
 
 }  // namespace

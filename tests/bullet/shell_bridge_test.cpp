@@ -358,7 +358,11 @@ TEST(ShellBridge, FloorConstraintsDetermineAShellLyingOnTheFloor) {
   const ShellStats free_stats = free.bridge->stats(free.shell);
   EXPECT_TRUE(free.bridge->floor(free.shell).empty());
   EXPECT_GT(free_stats.channel.failed, 0u);
-  EXPECT_EQ(free_stats.results_applied, 0u);
+  // No deformation was shown: the shell stays at rest. (With holds the server may store the empty
+  // hold state, the rest shape, after refusing the first put; the bridge shows that.)
+  for (size_t i = 0; i < free.mesh.positions().size(); ++i) {
+    EXPECT_EQ(free.bridge->control_positions(free.shell)[i], free.mesh.positions()[i]);
+  }
   ASSERT_TRUE(free_stats.last_error);
   EXPECT_EQ(free_stats.last_error->code, ErrorCode::kUnprocessable) << free_stats.last_error->message;
 }
@@ -375,6 +379,7 @@ TEST(ShellBridge, RequestsCarryTheSupportsAndTheSpreadContactForces) {
   settings.min_relative_change = 0.0;
   settings.supports.surface_load = Vec3(0.0, 0.0, -1.0);
   settings.background_mesh_update = false;  // a result shows in the update that receives it
+  settings.holds.enabled = false;            // one request per frame (the test double has no holds)
   const ShellId shell = bridge.add_shell(session, GeomId{}, plate.mesh, settings).value();
   btRigidBody* sphere = scene.add_sphere(0.05, 1.5, btVector3(0.11f, -0.07f, 0.06f));
   sphere->setActivationState(DISABLE_DEACTIVATION);
@@ -424,8 +429,10 @@ TEST(ShellBridge, HandlesAndBadSettings) {
   test::BulletWorld scene;
   ShellBridge bridge(scene.world);
   auto session = std::make_shared<test::ManualSession>(plate.mesh);
-  const ShellId a = bridge.add_shell(session, GeomId{}, plate.mesh, plate.settings()).value();
-  const ShellId b = bridge.add_shell(session, GeomId{}, plate.mesh, plate.settings()).value();
+  ShellSettings settings = plate.settings();
+  settings.holds.enabled = false;
+  const ShellId a = bridge.add_shell(session, GeomId{}, plate.mesh, settings).value();
+  const ShellId b = bridge.add_shell(session, GeomId{}, plate.mesh, settings).value();
   EXPECT_EQ(bridge.shells().size(), 2u);
   EXPECT_EQ(scene.world.getNumCollisionObjects(), 2);
   ASSERT_TRUE(bridge.remove_shell(a).ok());
@@ -435,7 +442,7 @@ TEST(ShellBridge, HandlesAndBadSettings) {
   EXPECT_THROW(bridge.stats(a), Exception);
   EXPECT_EQ(scene.world.getNumCollisionObjects(), 1);
   // The slot is reused with a new generation: the old handle stays invalid.
-  const ShellId c = bridge.add_shell(session, GeomId{}, plate.mesh, plate.settings()).value();
+  const ShellId c = bridge.add_shell(session, GeomId{}, plate.mesh, settings).value();
   EXPECT_EQ(c.index, a.index);
   EXPECT_NE(c.generation, a.generation);
   EXPECT_FALSE(bridge.valid(a));
@@ -456,6 +463,17 @@ TEST(ShellBridge, HandlesAndBadSettings) {
   EXPECT_EQ(bridge.add_shell(session, GeomId{}, plate.mesh, bad).error().code, ErrorCode::kInvalidArgument);
   EXPECT_EQ(bridge.add_shell(nullptr, GeomId{}, plate.mesh, plate.settings()).error().code,
             ErrorCode::kInvalidArgument);
+  // Hold ids: [A-Za-z0-9._-], room for ".contacts" within 64 characters; a lease in (0, 600 s].
+  for (const std::string& name : std::vector<std::string>{"a b", "slash/", std::string(56, 'x')}) {
+    bad = plate.settings();
+    bad.holds.name = name;
+    EXPECT_EQ(bridge.add_shell(session, GeomId{}, plate.mesh, bad).error().code, ErrorCode::kInvalidArgument) << name;
+  }
+  bad = plate.settings();
+  bad.holds.ttl = 0ms;
+  EXPECT_EQ(bridge.add_shell(session, GeomId{}, plate.mesh, bad).error().code, ErrorCode::kInvalidArgument);
+  // With holds the session must have them: the test double refuses, and add_shell says so.
+  EXPECT_FALSE(bridge.add_shell(session, GeomId{}, plate.mesh, plate.settings()).ok());
   EXPECT_EQ(bridge.shells().size(), 2u);
 }
 

@@ -89,6 +89,50 @@ TEST(Demo, ShortSessionRunsEveryLayer) {
   EXPECT_NE(format_summary(*report).find("follower"), std::string::npos);
 }
 
+// Two users at once (--users 2): their hands, the boxes and the floor are holds of one object,
+// and the third client on the event stream ends on the hold state's last result.
+TEST(Demo, TwoUsersShareTheObjectAndTheFollowerEndsOnTheLastState) {
+  DemoOptions options = short_options("softshell-demo-two-users");
+  options.users = 2;
+  options.pictures = false;
+  auto report = run_demo(options);
+  ASSERT_TRUE(report.ok()) << report.error().message;
+  const auto& m = report->multi_user;
+  ASSERT_TRUE(m.ran);
+  EXPECT_EQ(m.error, "");
+  EXPECT_EQ(m.users, 2);
+  ASSERT_EQ(m.updates.size(), 2u);
+  EXPECT_GE(m.updates[0], 2);
+  EXPECT_GE(m.updates[1], 2);
+  EXPECT_GT(m.update_p50_ms, 0.0);
+  EXPECT_LE(m.update_p50_ms, m.update_p95_ms);
+  // The follower ended on the newest hold-state result, with its positions.
+  EXPECT_TRUE(m.follower_matches);
+  EXPECT_GT(m.final_res_id, report->last_res_id);
+  EXPECT_GE(m.follower_received, 1);
+  // That result includes both users' last versions, and the bridge's floor and contacts.
+  EXPECT_TRUE(m.includes_every_user);
+  std::vector<std::string> ids;
+  for (const auto& [id, version] : m.final_holds) {
+    ids.push_back(id);
+    EXPECT_GE(version, 1u) << id;
+  }
+  EXPECT_EQ(ids, (std::vector<std::string>{"demo.contacts", "demo.floor", "user-a.hand", "user-b.hand"}));
+  // Every solve brings at least one new version (never an empty solve), and the merge counts add up.
+  EXPECT_GE(m.solves, m.solves_measured);
+  EXPECT_GT(m.solves_measured, 0);
+  EXPECT_GE(m.merged_mean, 1.0);
+  EXPECT_GE(m.merged_max, 1);
+  EXPECT_EQ(m.on_shell, m.bodies);
+  const auto j = nlohmann::json::parse(format_json(*report));
+  EXPECT_EQ(j["multi_user"]["final_res_id"].get<uint32_t>(), m.final_res_id);
+  EXPECT_EQ(j["multi_user"]["final_holds"]["user-a.hand"].get<uint64_t>(), m.final_holds[2].second);
+  EXPECT_NE(format_summary(*report).find("shared (2 users)"), std::string::npos);
+  // The single-user script is unchanged around it.
+  EXPECT_TRUE(report->follower.matches_master);
+  EXPECT_EQ(report->probes, 5);
+}
+
 // Loads past the scaled ones leave the linear range, and the report says so and what to do.
 TEST(Demo, LoadsBeyondTheLinearRangeAreWarnedAbout) {
   DemoOptions options = short_options("softshell-demo-range");

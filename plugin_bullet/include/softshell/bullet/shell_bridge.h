@@ -2,7 +2,9 @@
 /// \file
 /// \brief `ShellBridge`: softshell shells inside a Bullet world. Rigid bodies that hit a shell
 /// push on it (contact impulses become forces on its control points, sent asynchronously to any
-/// `Session`), and the shell's collision mesh follows the deformation the server computes.
+/// `Session`), and the shell's collision mesh follows the deformation the server computes. By
+/// default the bridge takes part in the object's shared hold state (PROTOCOL.md version 2): its
+/// floor and its contacts are two holds among those of other clients (users' hands, other worlds).
 
 #include <chrono>
 #include <condition_variable>
@@ -10,11 +12,14 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <string>
 #include <string_view>
 #include <thread>
-
-#include "softshell/executor.h"
 #include <vector>
+
+#include "softshell/event_subscription.h"
+#include "softshell/executor.h"
+#include "softshell/hold.h"
 
 #include <LinearMath/btTransform.h>
 
@@ -32,6 +37,23 @@ class btCollisionObject;
 class btDiscreteDynamicsWorld;
 
 namespace softshell::bullet {
+
+/// How a shell takes part in its object's hold state (PROTOCOL.md version 2).
+struct ShellHolds {
+  /// True: the shell's supports and floor are one hold (`<name>.floor`, put once by `add_shell`)
+  /// and its contact forces another (`<name>.contacts`, each change a new version, latest wins),
+  /// solved together with every other live hold of the object; the collision mesh follows the
+  /// object's hold-state results, whoever caused them (the bridge subscribes to its events).
+  /// False: each frame's forces go out with the supports as a request solved alone
+  /// (`POST .../results`, version 1: the newest request from any client overrides the others).
+  bool enabled = true;
+  /// Prefix of the hold ids (1 to 55 characters of [A-Za-z0-9._-]). Two bridges (or two shells)
+  /// on one object need different names; empty = "bullet-" and 8 random hex digits.
+  std::string name;
+  /// Lease of the holds (more than 0, at most 600 s): how long they outlive a bridge that stops
+  /// updating without being destroyed (a crash). Renewed while `update()` is called.
+  std::chrono::milliseconds ttl{3000};
+};
 
 /// Everything configurable about one shell in a Bullet world (units: the world's, which must be the
 /// shell's length unit; forces in N when lengths are metres and masses kilograms).
@@ -60,8 +82,11 @@ struct ShellSettings {
   /// Supports and constant loads sent with every request: fixed control points (vertex
   /// constraints), Lagrange and limit constraints, forces, surface load, pressure. The shell needs
   /// enough of them (or the floor) to be determined; the server answers kUnprocessable otherwise.
-  /// The frame's contact forces are added to `supports.forces`.
+  /// The frame's contact forces are added to `supports.forces` (with holds: `supports` and the
+  /// floor are the floor hold, the contact forces alone the contacts hold).
   DeformationRequest supports;
+  /// Holds or requests (see `ShellHolds`).
+  ShellHolds holds;
   /// The ground plane; touching parts are held there (added to the supports).
   FloorSettings floor;
   /// Placement of the shell's local frame (its control points' frame) in the world.
@@ -95,6 +120,11 @@ struct ShellStats {
   uint64_t unchanged_frames = 0;    ///< frames not submitted because their forces barely changed
   uint64_t results_applied = 0;     ///< results the collision mesh was updated to
   uint32_t res_id = 0;              ///< the result the collision mesh shows (0 = rest shape)
+  /// With holds: the hold versions of the result shown (every client's, this bridge's included).
+  HoldVersions shown_holds;
+  /// With holds: results shown that came from the object's events rather than the answers to
+  /// this bridge's own puts (other clients' changes, or results the answers had skipped).
+  uint64_t results_from_events = 0;
   ChannelStats channel;             ///< requests submitted, sent, replaced, completed, failed
   std::optional<Error> last_error;  ///< the session's last error (cleared by the next result)
 };
@@ -108,6 +138,14 @@ struct UpdateReport {
 };
 
 /// Shells in a `btDiscreteDynamicsWorld`.
+///
+/// With holds (`ShellHolds`, the default) the requests below are the contents of the shell's
+/// contacts hold (its forces only; the supports and the floor are the floor hold, put by
+/// `add_shell`), sent with `put_hold_async` through the same latest-wins channel (its renewals go
+/// out from `update()`), and the collision mesh moves to the newest hold-state result of the
+/// object, from the answers or from the object's events: the shape the bodies collide with
+/// includes other clients' holds. Both holds are released when the shell is removed or the
+/// bridge destroyed (one blocking round trip each).
 ///
 /// Each shell is a static collision object whose shape is a `CollisionMesh` (a
 /// `btBvhTriangleMeshShape` over the SDK tessellation). Call `update()` after every
@@ -146,8 +184,11 @@ class ShellBridge {
 
   /// Adds a shell for a geometry the session already holds; `mesh` must be the control mesh it
   /// was uploaded with (its rest shape, in the shell's local frame). Builds the tessellation,
-  /// the Bullet shape and the floor constraints (no network traffic). kInvalidArgument for bad
-  /// settings or a mesh the limit evaluator rejects.
+  /// the Bullet shape and the floor constraints. Without holds there is no network traffic; with
+  /// holds it puts the floor hold (if the supports and the floor hold anything; blocking: one
+  /// solve) and subscribes to the object's events, and fails with the server's error (kConflict
+  /// naming the holds the floor contradicts, kUnprocessable if the hold state is undetermined with
+  /// it). kInvalidArgument for bad settings or a mesh the limit evaluator rejects.
   Result<ShellId> add_shell(std::shared_ptr<Session> session, const GeomId& geometry, const ControlMesh& mesh,
                             const ShellSettings& settings = {});
 
@@ -185,7 +226,12 @@ class ShellBridge {
   const std::vector<ContactForce>& contacts(ShellId shell) const;
   /// The constraints the floor adds to every request (none if the floor is off or not touched).
   const DeformationRequest& floor(ShellId shell) const;
-  /// The request sent most recently, or nullptr.
+  /// The ids of the shell's floor and contacts holds ("" without holds). The floor hold exists
+  /// only if the supports and the floor hold something; the contacts hold from the first frame
+  /// with contacts on.
+  const std::string& floor_hold_id(ShellId shell) const;
+  const std::string& contacts_hold_id(ShellId shell) const;
+  /// The request sent most recently (with holds: the contacts hold's contents), or nullptr.
   const DeformationRequest* last_sent_request(ShellId shell) const;
   /// The geometry and its session.
   const GeomId& geometry(ShellId shell) const;
@@ -197,7 +243,9 @@ class ShellBridge {
   Shell& get(ShellId shell) const;
   void receive(Shell& shell, ChannelAnswer& answer, UpdateReport& report);
   void commit_prepared(Shell& shell, UpdateReport& report);
-  void show(Shell& shell, uint32_t res_id, UpdateReport& report);
+  void show(Shell& shell, uint32_t res_id, HoldVersions holds, UpdateReport& report);
+  void apply(Shell& shell, DeformationResult result, HoldVersions holds, UpdateReport& report);
+  void follow_events(Shell& shell, UpdateReport& report);
   bool busy(const Shell& shell) const;
   bool runnable_locked() const;
   void start_work();
