@@ -290,6 +290,9 @@ TEST(HoldsTest, UndeterminedOrSelfContradictingHoldIsUnprocessable) {
   EXPECT_EQ(o.error().code, ErrorCode::kUnprocessable);
   EXPECT_NE(o.error().message.find("rigid-body motion"), std::string::npos) << o.error().message;
   EXPECT_FALSE(s.hold(id, "push"));
+  // A refused first hold changes nothing: no result (not even the rest shape) is stored.
+  EXPECT_TRUE(s.result_ids(id).value().empty());
+  EXPECT_EQ(s.holds(id).value().res_id, 0u);
   // Constraints of one hold that cannot hold together.
   ASSERT_TRUE(put(s, id, "pins", pins()));
   DeformationRequest self = lift(grid_index(4, 2, 2), 0.1);

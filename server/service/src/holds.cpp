@@ -55,7 +55,7 @@ struct BatchOutcome {
   std::optional<engine::Solution> solution;    // of `state`; empty if it cannot be solved
   Error failure;                               // why not
   DeformationRequest request;                  // `state` as one request (what the result stores)
-  bool unchanged = false;                      // `state` is the solved state it started from: no new result
+  bool unchanged = false;                      // `state` is the state it started from: no new result
   int solves = 0;
 };
 
@@ -80,13 +80,15 @@ class BatchSolver {
     return solution;
   }
 
-  // `solved`: `committed` has a stored result (so it need not be solved again).
-  BatchOutcome run(const HoldMap& committed, bool solved, const std::vector<HoldChange>& batch) {
+  BatchOutcome run(const HoldMap& committed, const std::vector<HoldChange>& batch) {
     BatchOutcome out;
     out.refusals.resize(batch.size());
     HoldMap candidate = committed;
     for (const auto& change : batch) apply(candidate, change);
-    if (solved && same(candidate, committed)) {  // e.g. a new hold released before it was solved
+    // The state the batch started from (a new hold released before it was solved; every change
+    // refused, below): nothing to store, and the state keeps its status (solved, never solved or
+    // unsolvable).
+    if (same(candidate, committed)) {
       out.state = committed;
       out.unchanged = true;
       return out;
@@ -119,7 +121,7 @@ class BatchSolver {
       out.refusals[i] = explain_refusal(trial, change.hold_id, kept == state.end() ? 0 : kept->second->version,
                                         tried.error(), solver_.model().evaluator(), length_);
     }
-    if (!last && solved && same(state, committed)) {  // every change refused
+    if (!last && same(state, committed)) {  // every change refused
       out.state = committed;
       out.unchanged = true;
       out.solves = solves_;
@@ -170,7 +172,6 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
   HoldTable& t = e->holds;
   std::vector<HoldChange> batch;
   HoldMap committed;
-  bool solved = false;
   std::shared_ptr<const engine::Solver> solver;
   {
     std::lock_guard lock(e->mu);
@@ -180,7 +181,6 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
       batch.assign(std::make_move_iterator(t.pending.begin()), std::make_move_iterator(t.pending.end()));
       t.pending.clear();
       committed = t.committed;
-      solved = !t.unsolvable && t.latest;
       solver = e->solver;
     }
   }
@@ -191,7 +191,7 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
 
   const auto start = Clock::now();
   BatchSolver solve(*solver, e->geometry->mesh.bounding_diagonal());
-  BatchOutcome out = solve.run(committed, solved, batch);
+  BatchOutcome out = solve.run(committed, batch);
   const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
   if (out.solves > 0) hold_solves.fetch_add(1);
   hold_changes_solved.fetch_add(batch.size());
@@ -238,7 +238,11 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
   if (out.unchanged) {
     std::lock_guard lock(e->mu);
     result = t.latest;
+    const bool unsolvable = t.unsolvable;
+    const std::string message = t.message;
     commit(result, "");
+    t.unsolvable = unsolvable;  // the state did not change, nor did its status
+    t.message = message;
   } else if (out.solution) {
     auto stored = std::make_shared<StoredResult>();
     stored->positions = out.solution->positions(e->geometry->mesh);
