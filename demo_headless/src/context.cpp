@@ -41,15 +41,50 @@ double Context::probe_force() const {
   return options.material.youngs_modulus * t * t * t / (stage.size * stage.size) * probe_length();
 }
 
-double Context::calibrate(const DeformationRequest& probe, const std::string& phase) {
-  const DeformationResult result = deform(probe, phase + " (probe)");
+namespace {
+
+// The request with every load and prescribed displacement times k: the linear response is k times
+// the request's.
+DeformationRequest times(DeformationRequest r, double k) {
+  for (VertexConstraint& c : r.vertex_constraints) c.displacement *= k;
+  for (LagrangeConstraint& c : r.lagrange_constraints) c.values *= k;
+  for (PointForce& f : r.forces) f.force *= k;
+  for (LimitConstraint& c : r.limit_constraints) {
+    c.displacement *= k;
+    if (c.du_displacement) *c.du_displacement *= k;
+    if (c.dv_displacement) *c.dv_displacement *= k;
+  }
+  for (SurfaceForce& f : r.surface_forces) f.force *= k;
+  r.surface_load *= k;
+  r.pressure *= k;
+  return r;
+}
+
+}  // namespace
+
+double Context::calibrate(const DeformationRequest& given, const std::string& phase) {
+  // Results may come in f32 (the binary layout from a remote server): a probe whose shape change
+  // is within a few rounding steps of the coordinates would calibrate against rounding noise, so
+  // such a probe is sent again, scaled up (the model is linear: the scale is divided back).
+  constexpr double kMeasurable = 1e-5;  // of the object's size: ~100 f32 steps
+  DeformationRequest probe = given;
+  double probe_scale = 1.0;
+  DeformationResult result = deform(probe, phase + " (probe)");
   ++report.probes;
   Response r = measure_shape(view->surface, view->rest_vertices, view->rest_normals);
+  for (int again = 0; again < 3 && r.displacement < kMeasurable * stage.size; ++again) {
+    const double k = std::clamp(10.0 * kMeasurable * stage.size / std::max(r.displacement, 1e-30), 10.0, 1e6);
+    probe = times(probe, k);
+    probe_scale *= k;
+    result = deform(probe, phase + " (probe, scaled)");
+    ++report.probes;
+    r = measure_shape(view->surface, view->rest_vertices, view->rest_normals);
+  }
   if (auto field = stresses(result.res_id, 1)) {
     add_stresses(r, *field, options.material);
     range.observe_stresses(phase + " (probe)", *field, options.material);
   }
-  const double scale = scale_to_aims(r, stage.size, options.material, yield);
+  const double scale = scale_to_aims(r, stage.size, options.material, yield) * probe_scale;
   if (std::getenv("SOFTSHELL_DEMO_DEBUG")) {
     std::fprintf(stderr, "probe %s: |u| %.3g m, rotation %.3g rad, strain %.3g, nonlinearity %.3g -> scale %.3g\n",
                  phase.c_str(), r.displacement, r.rotation, r.strain.value_or(-1.0), r.nonlinearity().value_or(-1.0), scale);

@@ -317,6 +317,16 @@ TEST(DemoProgram, AgainstARunningServer) {
     EXPECT_TRUE(std::isfinite(vm.get<double>()));
   }
   EXPECT_TRUE(first.json["warnings"].empty()) << first.json["warnings"].dump();
+  // The loads are calibrated as in-process, although positions come back in f32 (binary): small
+  // probes are measured again, scaled up, instead of against rounding noise.
+  const ProgramRun local = run_program("--short --level 1 --no-pictures --json --quiet --out '" + ::testing::TempDir() +
+                                           "/softshell-demo-local'",
+                                       "local");
+  ASSERT_EQ(local.status, 0) << local.err;
+  for (const char* load : {"grab", "push"}) {
+    const double remote = first.json["loads"][load].get<double>(), here = local.json["loads"][load].get<double>();
+    EXPECT_NEAR(remote, here, 1e-3 * std::abs(here)) << load;
+  }
 
   const ProgramRun second = run_program(args, "remote-2");
   ASSERT_EQ(second.status, 0) << second.err;
