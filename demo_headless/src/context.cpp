@@ -60,19 +60,32 @@ DeformationRequest times(DeformationRequest r, double k) {
   return r;
 }
 
+// Whether positions came in single precision (every coordinate is a float): a remote server's
+// binary results.
+bool single_precision(const std::vector<Vec3>& positions) {
+  for (const Vec3& p : positions) {
+    for (int a = 0; a < 3; ++a) {
+      if (static_cast<double>(static_cast<float>(p[a])) != p[a]) return false;
+    }
+  }
+  return true;
+}
+
 }  // namespace
 
 double Context::calibrate(const DeformationRequest& given, const std::string& phase) {
   // Results may come in f32 (the binary layout from a remote server): a probe whose shape change
   // is within a few rounding steps of the coordinates would calibrate against rounding noise, so
-  // such a probe is sent again, scaled up (the model is linear: the scale is divided back).
+  // such a probe is sent again, scaled up (the model is linear: the scale is divided back). Results
+  // in double precision (in-process, JSON) need no second probe.
   constexpr double kMeasurable = 1e-5;  // of the object's size: ~100 f32 steps
   DeformationRequest probe = given;
   double probe_scale = 1.0;
   DeformationResult result = deform(probe, phase + " (probe)");
   ++report.probes;
   Response r = measure_shape(view->surface, view->rest_vertices, view->rest_normals);
-  for (int again = 0; again < 3 && r.displacement < kMeasurable * stage.size; ++again) {
+  const bool rounded = single_precision(result.positions);
+  for (int again = 0; again < 3 && rounded && r.displacement < kMeasurable * stage.size; ++again) {
     const double k = std::clamp(10.0 * kMeasurable * stage.size / std::max(r.displacement, 1e-30), 10.0, 1e6);
     probe = times(probe, k);
     probe_scale *= k;
