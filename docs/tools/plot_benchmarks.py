@@ -56,7 +56,8 @@ def main():
     def point(panel, cvs, t):
         x0 = margin + panel * (panel_w + margin)
         x = x0 + (math.log10(cvs) - x_range[0]) / (x_range[1] - x_range[0]) * panel_w
-        y = height - margin - (math.log10(t) - y_range[0]) / (y_range[1] - y_range[0]) * (height - 2 * margin)
+        # A time printed as 0 (below the table's resolution: "0 ms") sits at the bottom of the axis.
+        y = height - margin - (math.log10(max(t, 10.0 ** y_range[0])) - y_range[0]) / (y_range[1] - y_range[0]) * (height - 2 * margin)
         return x, y
 
     for panel, title in enumerate(('precomputation (stiffness, once per object)', 'one deformation (warm solve)')):
