@@ -62,12 +62,12 @@ extern "C" {
 
 /** softshell's version (the release this header belongs to). */
 #define SS_VERSION_MAJOR 0
-#define SS_VERSION_MINOR 1
+#define SS_VERSION_MINOR 2
 #define SS_VERSION_PATCH 0
-#define SS_VERSION_STRING "0.1.0"
+#define SS_VERSION_STRING "0.2.0"
 /** The version as one number, (major << 16) | (minor << 8) | patch, e.g. 0x000100 for 0.1.0. */
 #define SS_VERSION_NUMBER ((SS_VERSION_MAJOR << 16) | (SS_VERSION_MINOR << 8) | SS_VERSION_PATCH)
-/** The version of the loaded library, e.g. "0.1.0" (static storage). */
+/** The version of the loaded library, e.g. "0.2.0" (static storage). */
 SS_API const char* ss_version(void);
 /** The same as one number (SS_VERSION_NUMBER of the library's build). */
 SS_API uint32_t ss_version_number(void);
