@@ -93,6 +93,20 @@ bool Connection::wait_for_request(std::chrono::milliseconds timeout) const {
   return wait(POLLIN, timeout, true) > 0;
 }
 
+void Connection::linger(std::chrono::milliseconds limit) {
+  ::shutdown(sock_, SHUT_WR);
+  const auto deadline = std::chrono::steady_clock::now() + limit;
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0 || wait(POLLIN, left, true) <= 0) return;
+    ssize_t n;
+    do {
+      n = ::recv(sock_, buffer_.data(), buffer_.size(), 0);
+    } while (n < 0 && errno == EINTR);
+    if (n <= 0) return;
+  }
+}
+
 int Connection::take() {
   taken_ = true;
   return sock_;
@@ -123,10 +137,11 @@ bool Listener::process_and_close_socket(socket_t sock) {
   while (svr_sock_ != INVALID_SOCKET && left > 0 && connection.wait_for_request(keep_alive_timeout)) {
     bool closed = false;
     ok = process_request(connection, left == 1, closed, nullptr);
-    if (!ok || closed || connection.taken()) break;
+    if (!ok || closed || connection.taken() || connection.closing()) break;
     --left;
   }
   t_connection = nullptr;
+  if (connection.closing() && !connection.taken()) connection.linger(std::chrono::seconds(2));
   if (!connection.taken()) {
     ::shutdown(sock, SHUT_RDWR);
     ::close(sock);

@@ -50,6 +50,15 @@ class Connection final : public httplib::Stream {
   int take();
   bool taken() const { return taken_; }
 
+  /// Ends the connection after the answer being written: its request's body was refused unread,
+  /// so what follows on the socket cannot be parsed as a request.
+  void close_after_answer() { closing_ = true; }
+  bool closing() const { return closing_; }
+  /// Stops sending, then reads and discards what the peer still sends until it closes or
+  /// `limit` has passed: closing a socket with unread bytes resets the connection, and the reset
+  /// can destroy the answer before the peer reads it.
+  void linger(std::chrono::milliseconds limit);
+
  private:
   // poll() for `events` on the socket and the stop descriptor; > 0 ready, 0 timeout, < 0 error
   // or stop.
@@ -61,6 +70,7 @@ class Connection final : public httplib::Stream {
   std::array<char, 4096> buffer_{};
   size_t begin_ = 0, end_ = 0;  // unread bytes in buffer_
   bool taken_ = false;
+  bool closing_ = false;
 };
 
 /// The connection this thread serves right now (null outside a request).

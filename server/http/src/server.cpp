@@ -9,6 +9,7 @@
 #include <atomic>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "connection_threads.h"
@@ -40,6 +41,63 @@ struct EndpointCounters {
   mutable std::mutex status_mu;
   std::map<int, uint64_t> by_status;
 };
+
+std::string too_large_message(size_t max_body) {
+  return "the request body is larger than this server's limit of " + internal::mib(max_body) + " (--max-body-mb)";
+}
+
+// A request body refused before any of it is read: the status and JSON error of the answer.
+struct BodyRefusal {
+  int status;
+  std::string code, message;
+};
+
+// Request bodies are framed by Content-Length only. cpp-httplib 0.11 bounds nothing else: it
+// buffers a chunked body whole whatever its size, reads a body with neither header until the
+// peer closes, and reads a body over its limit through before answering 413. So the framing is
+// checked from the headers, before the library reads anything, for the methods whose body it
+// reads (POST, PUT, PATCH, DELETE). A DELETE without Content-Length has an empty body (RFC 9112
+// section 6.3); `req` is the library's non-const request object, so the header may be added.
+std::optional<BodyRefusal> refuse_body(const httplib::Request& req, size_t max_body) {
+  const std::string& m = req.method;
+  if (m != "POST" && m != "PUT" && m != "PATCH" && m != "DELETE" && m != "PRI") return std::nullopt;
+  if (req.has_header("Transfer-Encoding")) {
+    return BodyRefusal{411, "length_required",
+                       "request bodies with Transfer-Encoding (" + req.get_header_value("Transfer-Encoding").substr(0, 40) +
+                           ") are not accepted; send the body with a Content-Length header"};
+  }
+  const size_t lengths = req.get_header_value_count("Content-Length");
+  if (lengths == 0) {
+    if (m == "DELETE") {
+      const_cast<httplib::Request&>(req).set_header("Content-Length", "0");
+      return std::nullopt;
+    }
+    return BodyRefusal{411, "length_required",
+                       "a " + m + " request needs a Content-Length header (the body's size in bytes)"};
+  }
+  const std::string text = req.get_header_value("Content-Length");
+  const bool digits = !text.empty() && text.size() <= 19 && std::all_of(text.begin(), text.end(), [](char c) {
+    return c >= '0' && c <= '9';
+  });
+  if (lengths > 1 || !digits) {
+    return BodyRefusal{400, std::string(to_string(ErrorCode::kInvalidArgument)),
+                       "the request needs exactly one Content-Length header, a decimal number of bytes"};
+  }
+  if (std::stoull(text) > max_body) {
+    return BodyRefusal{413, std::string(to_string(ErrorCode::kPayloadTooLarge)), too_large_message(max_body)};
+  }
+  return std::nullopt;
+}
+
+// Answers a refused body; the connection ends after the answer, since the body's bytes that
+// may follow cannot be parsed as the next request.
+void answer_refusal(const BodyRefusal& refusal, httplib::Response& res) {
+  res.status = refusal.status;
+  res.set_header("Server", internal::kServerHeader);
+  res.set_header("Connection", "close");
+  res.set_content(wire::encode_error_json(refusal.code, refusal.message), std::string(wire::kJsonMediaType));
+  if (internal::Connection* c = internal::current_connection()) c->close_after_answer();
+}
 
 }  // namespace
 
@@ -81,10 +139,25 @@ struct HttpServer::Impl {
       ::setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
     });
 
+    // `Expect: 100-continue` is answered before routing: a body that would be refused gets its
+    // answer instead of the 100 (the library would ask for a body of any size).
+    server.set_expect_100_continue_handler([this](const httplib::Request& req, httplib::Response& res) {
+      t_request = RequestContext{Clock::now(), Endpoint::kUnmatched, true};
+      const auto refusal = refuse_body(req, ctx.options.max_body_bytes);
+      if (!refusal) return 100;
+      answer_refusal(*refusal, res);
+      // This answer path of the library writes no Content-Length of its own.
+      res.set_header("Content-Length", std::to_string(res.body.size()));
+      return refusal->status;
+    });
     server.set_pre_routing_handler(
-        httplib::Server::HandlerWithResponse([](const httplib::Request& req, httplib::Response& res) {
+        httplib::Server::HandlerWithResponse([this](const httplib::Request& req, httplib::Response& res) {
           t_request = RequestContext{Clock::now(), Endpoint::kUnmatched, true};
           res.set_header("Server", internal::kServerHeader);  // kept by every handler and error page
+          if (const auto refusal = refuse_body(req, ctx.options.max_body_bytes)) {
+            answer_refusal(*refusal, res);
+            return httplib::Server::HandlerResponse::Handled;
+          }
           // cpp-httplib inflates compressed request bodies without bounding the inflated size
           // (--max-body-mb limits only the compressed bytes): a small gzip bomb could take all
           // memory. Compressed bodies are refused before they are read; the connection is closed
@@ -95,6 +168,7 @@ struct HttpServer::Impl {
                                            "compressed request bodies (Content-Encoding: " + encoding.substr(0, 40) +
                                                ") are not accepted; send the body uncompressed"});
             res.set_header("Connection", "close");
+            if (internal::Connection* c = internal::current_connection()) c->close_after_answer();
             return httplib::Server::HandlerResponse::Handled;
           }
           return httplib::Server::HandlerResponse::Unhandled;
@@ -136,8 +210,7 @@ struct HttpServer::Impl {
       }
       case 413:
         code = std::string(to_string(ErrorCode::kPayloadTooLarge));
-        message = "the request body is larger than this server's limit of " + internal::mib(ctx.options.max_body_bytes) +
-                  " (--max-body-mb)";
+        message = too_large_message(ctx.options.max_body_bytes);
         break;
       case 414:
         code = "uri_too_long";
