@@ -19,12 +19,6 @@
 namespace softshell::demo {
 namespace {
 
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5))];
-}
-
 // The shipped mesh: beside the installed program (<bin>/../share/softshell/assets, wherever the
 // prefix was installed or moved to), else in the source tree the program was built from.
 std::filesystem::path default_mesh() {

@@ -2,6 +2,7 @@
 // The demo's second client (the paper's tablet): it mirrors the master through latest_result on
 // its own connection, and measures how far behind it is.
 
+#include <algorithm>
 #include <chrono>
 #include <map>
 #include <memory>
@@ -19,6 +20,13 @@ namespace softshell::demo {
 using Clock = std::chrono::steady_clock;
 inline double ms_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+/// The p-quantile (0..1, nearest rank) of `v`; 0 for none.
+inline double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5))];
 }
 
 /// When the master got each result, for the follower's lag. Thread-safe.

@@ -11,18 +11,13 @@
 #include <thread>
 
 #include "bullet_phase.h"
+#include "follower.h"
 #include "softshell/embedded_session.h"
 #include "softshell/hold_lease.h"
 #include "softshell/remote_session.h"
 
 namespace softshell::demo {
 namespace {
-
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5))];
-}
 
 uint64_t version_of(const HoldVersions& versions, const std::string& hold_id) {
   for (const auto& [id, version] : versions) {
