@@ -516,7 +516,7 @@ TEST(LimitEvaluator, ExtraordinaryCornerIntegralsAreTheSumsOfTheirRings) {
 
 // Topology the exact evaluation does not cover (an inner vertex of two faces, a non-manifold
 // vertex) is evaluated by OpenSubdiv Bfr instead of refused.
-TEST(LimitEvaluator, DegenerateTopologyIsStillEvaluated) {
+TEST(LimitEvaluator, DegenerateTopologyIsEvaluatedOrRefused) {
   const ControlMesh pillow({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)},
                            std::vector<std::vector<int32_t>>{{0, 1, 2, 3}, {3, 2, 1, 0}});
   std::vector<Vec3> points;
@@ -539,14 +539,19 @@ TEST(LimitEvaluator, DegenerateTopologyIsStillEvaluated) {
     for (int i = 0; i < 2; ++i) faces.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)});
   }
   const ControlMesh bowtie(points, faces);
-  for (const ControlMesh* mesh : {&pillow, &bowtie}) {
-    auto ev = LimitEvaluator::create(*mesh);
-    ASSERT_TRUE(ev.ok()) << ev.error().message;
-    for (int32_t f = 0; f < mesh->num_faces(); ++f) {
-      const LimitStencil st = ev->stencil({f, 0, 0.3, 0.6});
-      EXPECT_NEAR(sum(st.position), 1.0, 1e-12);
-    }
+  auto ev = LimitEvaluator::create(pillow);
+  ASSERT_TRUE(ev.ok()) << ev.error().message;
+  for (int32_t f = 0; f < pillow.num_faces(); ++f) {
+    const LimitStencil st = ev->stencil({f, 0, 0.3, 0.6});
+    EXPECT_NEAR(sum(st.position), 1.0, 1e-12);
   }
+  // Two pieces touching at one control point: a non-manifold vertex (PROTOCOL.md: 422), refused
+  // by the one mesh validator with a message that says where and what to do.
+  auto pinched = LimitEvaluator::create(bowtie);
+  ASSERT_FALSE(pinched.ok());
+  EXPECT_EQ(pinched.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(pinched.error().message.find("control point 8"), std::string::npos) << pinched.error().message;
+  EXPECT_NE(pinched.error().message.find("pinches"), std::string::npos) << pinched.error().message;
 }
 
 }  // namespace

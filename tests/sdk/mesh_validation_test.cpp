@@ -69,6 +69,25 @@ TEST(MeshValidation, NonManifoldEdge) {
   EXPECT_EQ(validate_mesh(mesh).error().code, ErrorCode::kUnprocessable);
 }
 
+// Two quads that share only a corner: every edge is fine, but the surface pinches to a point at
+// the shared control point (PROTOCOL.md: non-manifold topology is a 422).
+TEST(MeshValidation, NonManifoldVertex) {
+  ControlMesh bowtie({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0), Vec3(2, 1, 0), Vec3(2, 2, 0),
+                      Vec3(1, 2, 0)},
+                     std::vector<std::vector<int32_t>>{{0, 1, 2, 3}, {2, 4, 5, 6}});
+  MeshIssue issue = first_issue(bowtie);
+  EXPECT_EQ(issue.kind, MeshIssueKind::kNonManifoldVertex);
+  EXPECT_EQ(issue.vertex, 2);
+  EXPECT_NE(issue.message.find("faces 0 and 1"), std::string::npos) << issue.message;
+  EXPECT_EQ(validate_mesh(bowtie).error().code, ErrorCode::kUnprocessable);
+  // A closed fan around a vertex (an interior vertex) and an open one (a boundary vertex) are fine.
+  EXPECT_TRUE(find_mesh_issues(square_pair()).empty());
+  ControlMesh fan({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0), Vec3(-1, 1, 0), Vec3(-1, 0, 0),
+                   Vec3(-1, -1, 0), Vec3(0, -1, 0), Vec3(1, -1, 0)},
+                  std::vector<std::vector<int32_t>>{{0, 1, 2, 3}, {0, 3, 4, 5}, {0, 5, 6, 7}, {0, 7, 8, 1}});
+  EXPECT_TRUE(find_mesh_issues(fan).empty()) << find_mesh_issues(fan).front().message;
+}
+
 TEST(MeshValidation, InconsistentOrientation) {
   ControlMesh mesh({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(2, 0, 0), Vec3(0, 1, 0), Vec3(1, 1, 0), Vec3(2, 1, 0)},
                    std::vector<std::vector<int32_t>>{{0, 1, 4, 3}, {1, 4, 5, 2}});

@@ -54,6 +54,15 @@ TEST(ObjIo, ReadsOpenSubdivTags) {
   EXPECT_EQ(mesh->boundary(), BoundaryMode::kNone);
 }
 
+TEST(ObjIo, NonManifoldVertexNamesTheLineAndTheVertex) {
+  const auto mesh = parse_obj("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 1 0\nv 2 2 0\nv 1 2 0\n"
+                              "f 1 2 3 4\nf 3 5 6 7\n", "bowtie.obj", ObjReadOptions{.validate = true});
+  ASSERT_FALSE(mesh);
+  EXPECT_EQ(mesh.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(mesh.error().message.find("bowtie.obj:9: this face meets other faces only at vertex 3"), std::string::npos)
+      << mesh.error().message;
+}
+
 TEST(ObjIo, LineContinuation) {
   auto mesh = parse_obj("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 \\\n 3\n");
   ASSERT_TRUE(mesh.ok()) << mesh.error().message;

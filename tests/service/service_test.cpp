@@ -96,6 +96,14 @@ TEST(ServiceTest, UploadValidation) {
                    Vec3(0, 0, 1), Vec3(1, 0, 1)},
                   std::vector<std::vector<int32_t>>{{0, 1, 3, 2}, {1, 0, 4, 5}, {0, 1, 7, 6}});
   EXPECT_EQ(s.upload(fan, exact_material()).error().code, ErrorCode::kUnprocessable);
+  // Non-manifold: two quads sharing only a corner.
+  ControlMesh bowtie({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0), Vec3(2, 1, 0), Vec3(2, 2, 0),
+                      Vec3(1, 2, 0)},
+                     std::vector<std::vector<int32_t>>{{0, 1, 2, 3}, {2, 4, 5, 6}});
+  const auto pinched = s.upload(bowtie, exact_material());
+  ASSERT_FALSE(pinched);
+  EXPECT_EQ(pinched.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(pinched.error().message.find("meet only there"), std::string::npos) << pinched.error().message;
   ControlMesh repeated({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}, std::vector<std::vector<int32_t>>{{0, 1, 1}});
   EXPECT_EQ(s.upload(repeated, exact_material()).error().code, ErrorCode::kInvalidArgument);
   EXPECT_EQ(s.upload(exact_grid(), exact_material(), std::string(257, 'a')).error().code, ErrorCode::kInvalidArgument);

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <string>
 
+#include "softshell/disjoint_sets.h"
+
 namespace softshell {
 namespace {
 
@@ -89,6 +91,7 @@ struct HalfEdge {
   uint64_t key;   // (min, max) vertex pair
   int32_t face;
   bool forward;   // traversed from min to max
+  int32_t corner_lo = -1, corner_hi = -1;  // the face's corners (flat indices) at the min and max vertex
   bool operator<(const HalfEdge& o) const { return key < o.key || (key == o.key && face < o.face); }
 };
 
@@ -103,9 +106,12 @@ void find_unusable(const ControlMesh& mesh, IssueList& issues) {
   edges.reserve(mesh.face_indices().size());
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     auto face = mesh.face(f);
+    const int32_t first = mesh.face_offsets()[static_cast<size_t>(f)];
     for (size_t i = 0; i < face.size(); ++i) {
-      int32_t a = face[i], b = face[(i + 1) % face.size()];
-      edges.push_back({edge_key(a, b), f, a < b});
+      const size_t next = (i + 1) % face.size();
+      int32_t a = face[i], b = face[next];
+      const auto ca = first + static_cast<int32_t>(i), cb = first + static_cast<int32_t>(next);
+      edges.push_back({edge_key(a, b), f, a < b, a < b ? ca : cb, a < b ? cb : ca});
     }
   }
   std::sort(edges.begin(), edges.end());
@@ -127,6 +133,39 @@ void find_unusable(const ControlMesh& mesh, IssueList& issues) {
                      " in the same direction: their orientations disagree (reverse the order of one face's vertices)");
     }
     i = j;
+  }
+
+  // Around every control point its faces must form one fan, joined through the edges at the
+  // point: faces that meet only at a corner (two quads sharing one vertex) make the surface pinch
+  // to a point, which has no tangent plane there.
+  DisjointSets fans(mesh.face_indices().size());  // over the faces' corners
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j].key == edges[i].key) ++j;
+    if (j - i == 2) {
+      fans.unite(edges[i].corner_lo, edges[i + 1].corner_lo);
+      fans.unite(edges[i].corner_hi, edges[i + 1].corner_hi);
+    }
+    i = j;
+  }
+  std::vector<int32_t> fan_of(static_cast<size_t>(mesh.num_vertices()), -1), face_of(fan_of.size(), -1);
+  std::vector<char> reported(fan_of.size(), 0);
+  for (int32_t f = 0; f < mesh.num_faces() && !issues.full(); ++f) {
+    const int32_t first = mesh.face_offsets()[static_cast<size_t>(f)];
+    for (int32_t c = first; c < mesh.face_offsets()[static_cast<size_t>(f) + 1]; ++c) {
+      const auto v = static_cast<size_t>(mesh.face_indices()[static_cast<size_t>(c)]);
+      const int32_t fan = fans.find(c);
+      if (fan_of[v] < 0) {
+        fan_of[v] = fan;
+        face_of[v] = f;
+      } else if (fan_of[v] != fan && !reported[v]) {
+        reported[v] = 1;
+        issues.add(MeshIssueKind::kNonManifoldVertex, f, static_cast<int32_t>(v),
+                   vertex_name(static_cast<int32_t>(v)) + " joins faces " + std::to_string(face_of[v]) + " and " +
+                       std::to_string(f) + ", which meet only there (through no edge): the surface pinches to a " +
+                       "point; give each fan of faces its own control point, or join the faces through an edge");
+      }
+    }
   }
 
   // Creases must lie on edges.
@@ -179,6 +218,7 @@ ErrorCode MeshIssue::code() const {
     case MeshIssueKind::kBadTag:
       return ErrorCode::kInvalidArgument;
     case MeshIssueKind::kNonManifoldEdge:
+    case MeshIssueKind::kNonManifoldVertex:
     case MeshIssueKind::kInconsistentOrientation:
     case MeshIssueKind::kZeroAreaFace:
     case MeshIssueKind::kUnusedVertex:

@@ -341,6 +341,10 @@ class ObjParser {
                std::to_string(int64_t{b} + 1) + " belongs to the faces on lines " + lines +
                "; a surface edge may belong to at most 2 faces";
       }
+      case K::kNonManifoldVertex:
+        return at_face(f) + "this face meets other faces only at " + vertex(v) +
+               " (through no edge there): the surface pinches to a point; give each fan of faces its own vertex, "
+               "or join the faces through an edge";
       case K::kInconsistentOrientation: {
         const auto same = [](const auto& on) { return on.size() == 2 && on[0].second == on[1].second; };
         const auto [a, b] = edge_at(mesh, f, v, same);

@@ -24,6 +24,7 @@ enum class MeshIssueKind : uint8_t {
   kBadTag,            ///< a crease/corner tag with a negative or non-finite sharpness, or a crease on a non-edge
   // unusable (kUnprocessable)
   kNonManifoldEdge,          ///< an edge shared by more than two faces
+  kNonManifoldVertex,        ///< faces that meet only at a control point (not through an edge there)
   kInconsistentOrientation,  ///< two faces traverse their shared edge in the same direction
   kZeroAreaFace,             ///< a face whose area is (numerically) zero
   kUnusedVertex,             ///< a control point used by no face (it would have no stiffness)
