@@ -275,6 +275,22 @@ TEST(WireRequestTest, JsonDefaultsAndProtocolExample) {
   EXPECT_TRUE(wire::decode_request_json("{}")->empty());
 }
 
+// The strict-request policy: a key twice in one object is refused (not "last wins"); the same key
+// in different objects is fine.
+TEST(WireJson, DuplicateKeysAreRefused) {
+  auto top = wire::decode_request_json(R"({"pressure": 1, "pressure": 2})");
+  ASSERT_FALSE(top);
+  EXPECT_EQ(top.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(top.error().message.find("the key \"pressure\" appears twice"), std::string::npos) << top.error().message;
+  auto nested = wire::decode_request_json(
+      R"({"forces": [{"index": 0, "force": [0, 0, 1]}, {"index": 1, "index": 2, "force": [0, 0, 1]}]})");
+  ASSERT_FALSE(nested);
+  EXPECT_NE(nested.error().message.find("\"index\" appears twice"), std::string::npos) << nested.error().message;
+  auto fine = wire::decode_request_json(R"({"forces": [{"index": 0, "force": [0, 0, 1]}, {"index": 1, "force": [0, 0, 1]}]})");
+  ASSERT_TRUE(fine) << fine.error().message;
+  EXPECT_EQ(fine->forces.size(), 2u);
+}
+
 // PROTOCOL.md version 2: "model": "nonlinear" (default linear). The binary body cannot carry it,
 // so the binary encoder refuses a nonlinear request rather than let it be solved linearly.
 TEST(WireRequestTest, ModelFieldRoundTripsAndUnknownModelsAreRefused) {

@@ -6,11 +6,14 @@
 // Request bodies (uploads, deformation requests) are strict: unknown fields are an error, so a
 // typo never silently changes a simulation. Response bodies are lenient: unknown fields are
 // ignored, so clients keep working against newer servers.
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <initializer_list>
 #include <limits>
 #include <string>
+#include <unordered_set>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -114,10 +117,34 @@ void check_depth(std::string_view body) {
   }
 }
 
+// A key repeated in one object: the strict-request policy refuses it (nlohmann keeps the last
+// one silently).
+struct DuplicateKey {
+  std::string key;
+};
+
 json parse(std::string_view body) {
   check_depth(body);
+  std::vector<std::unordered_set<std::string>> keys;  // per open object, the keys seen so far
+  const json::parser_callback_t strict = [&keys](int, json::parse_event_t event, json& parsed) {
+    switch (event) {
+      case json::parse_event_t::object_start: keys.emplace_back(); break;
+      case json::parse_event_t::object_end:
+        if (!keys.empty()) keys.pop_back();
+        break;
+      case json::parse_event_t::key: {
+        const std::string& key = parsed.get_ref<const std::string&>();
+        if (!keys.back().insert(key).second) throw DuplicateKey{key};
+        break;
+      }
+      default: break;
+    }
+    return true;
+  };
   try {
-    return json::parse(body.begin(), body.end());
+    return json::parse(body.begin(), body.end(), strict);
+  } catch (const DuplicateKey& d) {
+    bad("invalid JSON: the key \"" + d.key.substr(0, 64) + "\" appears twice in one object; each key may appear once");
   } catch (const json::exception& e) {
     // "[json.exception.parse_error.101] parse error at line 1, ..." -> "parse error at line 1, ..."
     std::string what = e.what();
