@@ -19,13 +19,6 @@
 namespace softshell::demo {
 namespace {
 
-uint64_t version_of(const HoldVersions& versions, const std::string& hold_id) {
-  for (const auto& [id, version] : versions) {
-    if (id == hold_id) return version;
-  }
-  return 0;
-}
-
 // What every client of this process saw of the hold state: each result's hold versions and when
 // a client here first saw it (answers, the bridge, the follower). Thread-safe.
 class Sightings {

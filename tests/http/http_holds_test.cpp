@@ -54,11 +54,7 @@ DeformationRequest push(double fz, int n = 4) {
 }
 
 uint64_t version_in(const HeldResult& r, const std::string& hold) {
-  if (!r.holds) return 0;
-  for (const auto& [id, v] : *r.holds) {
-    if (id == hold) return v;
-  }
-  return 0;
+  return r.holds ? version_of(*r.holds, hold) : 0;
 }
 
 HeldResult held(const Reply& r) {

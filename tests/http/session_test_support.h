@@ -56,11 +56,7 @@ inline DeformationRequest push(double fz, int n = 4) {
 }
 
 inline uint64_t version_in(const HeldResult& r, const std::string& hold) {
-  if (!r.holds) return 0;
-  for (const auto& [id, v] : *r.holds) {
-    if (id == hold) return v;
-  }
-  return 0;
+  return r.holds ? version_of(*r.holds, hold) : 0;
 }
 
 }  // namespace softshell::test

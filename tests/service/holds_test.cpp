@@ -81,11 +81,7 @@ ResultPtr put(Service& s, const GeomId& id, const std::string& hold, Deformation
 }
 
 uint64_t version_in(const StoredResult& r, const std::string& hold) {
-  if (!r.holds) return 0;
-  for (const auto& [id, v] : *r.holds) {
-    if (id == hold) return v;
-  }
-  return 0;
+  return r.holds ? version_of(*r.holds, hold) : 0;
 }
 
 TEST(HoldsTest, HoldStateIsTheSolveOfAllHoldsTogether) {

@@ -26,14 +26,6 @@ Reaper<HoldPutObject>& reaper() {
   return *r;
 }
 
-uint64_t version_of(const HeldResult& r, const std::string& hold_id) {
-  if (!r.holds) return 0;
-  for (const auto& [id, v] : *r.holds) {
-    if (id == hold_id) return v;
-  }
-  return 0;
-}
-
 }  // namespace
 
 extern "C" {
@@ -79,7 +71,7 @@ ss_status ss_hold_put_read(ss_hold_put* operation, uint32_t* out_res_id, uint64_
     if (!r.ok()) throw Exception(r.error());
     write_xyz(r.value().result.positions, out_xyz, capacity, out_count, "deformed positions");
     *out_res_id = r.value().result.res_id;
-    if (out_version) *out_version = version_of(r.value(), op->hold_id);
+    if (out_version) *out_version = r.value().holds ? version_of(*r.value().holds, op->hold_id) : 0;
   });
 }
 

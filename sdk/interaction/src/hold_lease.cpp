@@ -54,11 +54,7 @@ struct HoldLease::State {
       Result<HeldResult> answer = session->put_hold(id, hold_id, body, options.ttl);
       lock.lock();
       if (answer) {
-        if (answer->holds) {
-          for (const auto& [hold, v] : *answer->holds) {
-            if (hold == hold_id) version = std::max(version, v);
-          }
-        }
+        if (answer->holds) version = std::max(version, version_of(*answer->holds, hold_id));
         accepted = std::move(body);
         latest = std::move(*answer);
         error.reset();

@@ -53,11 +53,6 @@ class TaskQueue {
     idle_.wait(lock, [&] { return runners_ == 0 && tasks_.empty(); });
   }
 
-  size_t queued() const {
-    std::lock_guard lock(mu_);
-    return tasks_.size();
-  }
-
  private:
   void drain() {
     for (;;) {
@@ -80,7 +75,7 @@ class TaskQueue {
 
   std::shared_ptr<Executor> executor_;
   const size_t limit_;
-  mutable std::mutex mu_;
+  std::mutex mu_;
   std::condition_variable idle_;
   std::deque<std::function<void()>> tasks_;
   size_t runners_ = 0;  // runners posted and not finished

@@ -25,6 +25,14 @@ inline constexpr size_t kMaxHoldIdLength = 64;
 /// The versions of the holds a hold-state result includes, sorted by hold id.
 using HoldVersions = std::vector<std::pair<std::string, uint64_t>>;
 
+/// The version of `hold_id` in `versions`; 0 if the result does not include that hold.
+inline uint64_t version_of(const HoldVersions& versions, std::string_view hold_id) {
+  for (const auto& [id, version] : versions) {
+    if (id == hold_id) return version;
+  }
+  return 0;
+}
+
 /// Where a geometry's hold state is.
 enum class HoldStateStatus : uint8_t {
   kSolved,      ///< the newest hold-state result includes every live hold's newest version
