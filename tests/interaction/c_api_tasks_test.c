@@ -88,35 +88,9 @@ static void pool_stop(pool* p) {
   pthread_mutex_destroy(&p->mu);
 }
 
-/* ---- the scene: a plate pinned at its corners, pushed in the middle ---- */
+/* ---- the scene: a flat plate (make_grid) pinned at its corners, pushed in the middle ---- */
 
 enum { N = 6, NV = (N + 1) * (N + 1) };
-
-static ss_mesh* make_plate(void) {
-  double xyz[3 * NV];
-  int32_t sizes[N * N], indices[4 * N * N];
-  for (int j = 0; j <= N; ++j) {
-    for (int i = 0; i <= N; ++i) {
-      double* q = xyz + 3 * (j * (N + 1) + i);
-      q[0] = (double)i / N;
-      q[1] = (double)j / N;
-      q[2] = 0.0;
-    }
-  }
-  for (int j = 0; j < N; ++j) {
-    for (int i = 0; i < N; ++i) {
-      const int f = j * N + i, v = j * (N + 1) + i;
-      sizes[f] = 4;
-      indices[4 * f] = v;
-      indices[4 * f + 1] = v + 1;
-      indices[4 * f + 2] = v + N + 2;
-      indices[4 * f + 3] = v + N + 1;
-    }
-  }
-  ss_mesh* mesh = NULL;
-  CHECK_OK(ss_mesh_create(xyz, NV, sizes, N * N, indices, 4 * N * N, &mesh));
-  return mesh;
-}
 
 static ss_request* make_push(void) {
   ss_request* r = NULL;
@@ -178,7 +152,7 @@ int main(void) {
   CHECK_OK(ss_session_create_remote_on(url, NULL, &client_tasks, &remote));
   CHECK(ss_session_create_remote_on(url, NULL, &no_enqueue, &bad) == SS_INVALID_ARGUMENT && bad == NULL);
 
-  ss_mesh* mesh = make_plate();
+  ss_mesh* mesh = make_grid(N);
   const ss_material material = {7.0e10, 0.3, 0.01, 2700.0};
   ss_geom_id id;
   CHECK_OK(ss_session_upload(server, mesh, &material, NULL, &id, NULL));

@@ -13,38 +13,6 @@
 
 #include "c_check.h"
 
-/* A flat n x n grid of quads over [0, 1]^2 in the plane z = 0, counter-clockwise seen from +z. */
-static ss_mesh* make_grid(int n) {
-  const int nv = (n + 1) * (n + 1);
-  double* xyz = malloc(sizeof(double) * 3 * (size_t)nv);
-  int32_t* sizes = malloc(sizeof(int32_t) * (size_t)(n * n));
-  int32_t* indices = malloc(sizeof(int32_t) * 4 * (size_t)(n * n));
-  for (int j = 0; j <= n; ++j) {
-    for (int i = 0; i <= n; ++i) {
-      double* p = xyz + 3 * (j * (n + 1) + i);
-      p[0] = (double)i / n;
-      p[1] = (double)j / n;
-      p[2] = 0.0;
-    }
-  }
-  for (int j = 0; j < n; ++j) {
-    for (int i = 0; i < n; ++i) {
-      const int f = j * n + i;
-      sizes[f] = 4;
-      indices[4 * f + 0] = j * (n + 1) + i;
-      indices[4 * f + 1] = j * (n + 1) + i + 1;
-      indices[4 * f + 2] = (j + 1) * (n + 1) + i + 1;
-      indices[4 * f + 3] = (j + 1) * (n + 1) + i;
-    }
-  }
-  ss_mesh* mesh = NULL;
-  CHECK_OK(ss_mesh_create(xyz, nv, sizes, n * n, indices, 4 * n * n, &mesh));
-  free(xyz);
-  free(sizes);
-  free(indices);
-  return mesh;
-}
-
 static void test_version_and_status(void) {
   CHECK(ss_abi_version() == SS_ABI_VERSION);
   CHECK(strcmp(ss_version(), SS_VERSION_STRING) == 0);
