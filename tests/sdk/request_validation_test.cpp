@@ -101,3 +101,57 @@ TEST(RequestValidation, OneElementAtATime) {
 
 }  // namespace
 }  // namespace softshell
+
+namespace softshell {
+namespace {
+
+void expect_over_limit(const Result<void>& r, const std::string& part) {
+  ASSERT_FALSE(r.ok()) << "expected a refusal mentioning '" << part << "'";
+  EXPECT_EQ(r.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(r.error().message.find(part), std::string::npos) << r.error().message;
+}
+
+// The counts one request may have: bounded so that a small body cannot hold a solver for
+// seconds (each surface constraint is three dense rows beside the factor).
+TEST(RequestValidation, CountsAreBoundedByTheLimitsAndTheControlPoints) {
+  const RequestLimits big = RequestLimits::for_control_points(10000);
+  EXPECT_EQ(big.surface_constraints, RequestLimits::kMaxSurfaceConstraints);
+  EXPECT_EQ(big.vertex_constraints, RequestLimits::kMinElementLimit);
+  const RequestLimits huge = RequestLimits::for_control_points(100000);
+  EXPECT_EQ(huge.vertex_constraints, 300000u);
+  EXPECT_EQ(huge.forces, 400000u);
+  const RequestLimits small = RequestLimits::for_control_points(12);
+  EXPECT_EQ(small.surface_constraints, 12u);  // no more than the control points
+
+  const RequestContext many{10000, nullptr};
+  DeformationRequest r;
+  LagrangeConstraint one{{5}, {Vec3(1, 1, 1)}, Vec3::Zero()};
+  r.lagrange_constraints.assign(200, one);
+  r.limit_constraints.assign(56, LimitConstraint{{0, 0, 0.5, 0.5}, Vec3::Zero(), std::nullopt, std::nullopt});
+  EXPECT_TRUE(validate_request(r, many).ok());  // 256: at the limit
+  r.lagrange_constraints.push_back(one);
+  expect_over_limit(validate_request(r, many), "257 Lagrange and limit constraints; one request may have at most 256");
+  EXPECT_TRUE(validate_request(r, {}).ok());  // without the geometry nothing is counted (C ABI elements)
+
+  const RequestContext twelve{12, nullptr};
+  DeformationRequest pins;
+  pins.vertex_constraints.assign(RequestLimits::kMinElementLimit, VertexConstraint{3, kAxisAll, Vec3::Zero()});
+  EXPECT_TRUE(validate_request(pins, twelve).ok());
+  pins.vertex_constraints.push_back(pins.vertex_constraints.back());
+  expect_over_limit(validate_request(pins, twelve), "65537 vertex constraints");
+
+  DeformationRequest pushes;
+  pushes.forces.assign(RequestLimits::kMinElementLimit + 1, PointForce{2, Vec3(0, 0, 1)});
+  expect_over_limit(validate_request(pushes, twelve), "send their sum once");
+
+  DeformationRequest long_row;
+  long_row.lagrange_constraints.push_back({std::vector<int32_t>(13, 1), std::vector<Vec3>(13, Vec3(1, 0, 0)), Vec3::Zero()});
+  expect_over_limit(validate_request(long_row, twelve), "13 terms");
+
+  DeformationRequest spread;
+  spread.surface_forces.assign(RequestLimits::kMaxSurfaceForces + 1, SurfaceForce{{0, 0, 0.5, 0.5}, Vec3(0, 0, 1)});
+  expect_over_limit(validate_request(spread, many), "4097 surface forces");
+}
+
+}  // namespace
+}  // namespace softshell

@@ -277,6 +277,31 @@ TEST(WireRequestTest, JsonDefaultsAndProtocolExample) {
 
 // The strict-request policy: a key twice in one object is refused (not "last wins"); the same key
 // in different objects is fine.
+// A Lagrange constraint with no terms and zero values says nothing: both decoders drop it, so a
+// body padded with them stores (and serves again) nothing of them. With a value it is kept (the
+// solver refuses it: an all-zero equation with a nonzero value).
+TEST(WireRequestTest, EmptyLagrangeConstraintsAreDroppedAtDecode) {
+  Bytes binary;
+  binary.u32(0).u32(3).u32(0);
+  binary.u32(0).vec(0, 0, 0);                         // empty: dropped
+  binary.u32(1).u32(4).vec(1, 0, 0).vec(0, 0, 0);     // one term: kept
+  binary.u32(0).vec(0, 0.5f, 0);                      // no terms but a value: kept
+  auto b = wire::decode_request_binary(binary.data);
+  ASSERT_TRUE(b) << b.error().message;
+  ASSERT_EQ(b->lagrange_constraints.size(), 2u);
+  EXPECT_EQ(b->lagrange_constraints[0].indices, std::vector<int32_t>{4});
+  EXPECT_EQ(b->lagrange_constraints[1].values, Vec3(0, 0.5, 0));
+
+  std::string json = "{\"lagrange_constraints\": [";
+  for (int i = 0; i < 1000; ++i) json += "{\"indices\": [], \"coefficients\": [], \"values\": [0, 0, 0]},";
+  json += "{\"indices\": [2], \"coefficients\": [[0, 1, 0]], \"values\": [0, 0.01, 0]}]}";
+  auto j = wire::decode_request_json(json);
+  ASSERT_TRUE(j) << j.error().message;
+  ASSERT_EQ(j->lagrange_constraints.size(), 1u);
+  EXPECT_EQ(j->lagrange_constraints[0].indices, std::vector<int32_t>{2});
+  EXPECT_LT(wire::encode_request_json(*j).size(), 200u);
+}
+
 TEST(WireJson, DuplicateKeysAreRefused) {
   auto top = wire::decode_request_json(R"({"pressure": 1, "pressure": 2})");
   ASSERT_FALSE(top);

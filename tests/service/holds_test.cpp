@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "server_test_support.h"
+#include "softshell/request_validation.h"
 #include "softshell/service/service.h"
 
 namespace softshell::service {
@@ -617,8 +618,8 @@ TEST(HoldsTest, HoldsCountAgainstTheMemoryBudget) {
   tight.store_bytes = probe.stats().store_bytes + (size_t{1} << 20);
   Service small(tight);
   const GeomId sid = upload_ready(small);
-  big.forces.assign(200000, PointForce{grid_index(4, 2, 2), Vec3(0, 0, -1e-6)});
-  auto refused = small.put_hold(sid, "big", big);
+  big.forces.assign(RequestLimits::kMinElementLimit, PointForce{grid_index(4, 2, 2), Vec3(0, 0, -1e-6)});
+  auto refused = small.put_hold(sid, "big", big);  // 2 MiB of forces
   ASSERT_FALSE(refused);
   EXPECT_EQ(refused.error().code, ErrorCode::kResourceExhausted);
   EXPECT_FALSE(small.hold(sid, "big"));

@@ -1,5 +1,6 @@
 #include "softshell/request_validation.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <string>
@@ -99,7 +100,58 @@ Result<void> validate_loads(const Vec3& surface_load, double pressure) {
   return {};
 }
 
+RequestLimits RequestLimits::for_control_points(int32_t num_control_points) {
+  const auto n = static_cast<size_t>(std::max(num_control_points, 1));
+  return RequestLimits{std::min(kMaxSurfaceConstraints, n), std::max(kMinElementLimit, 3 * n),
+                       std::max(kMinElementLimit, 4 * n), n};
+}
+
+namespace {
+
+Result<void> check_counts(const DeformationRequest& request, int32_t num_control_points) {
+  const RequestLimits limits = RequestLimits::for_control_points(num_control_points);
+  const std::string points = std::to_string(num_control_points) + " control points";
+  auto over = [](std::string message) -> Result<void> { return Error{ErrorCode::kUnprocessable, std::move(message)}; };
+  const size_t surface = request.lagrange_constraints.size() + request.limit_constraints.size();
+  if (surface > limits.surface_constraints) {
+    return over("the request has " + std::to_string(surface) +
+                " Lagrange and limit constraints; one request may have at most " +
+                std::to_string(limits.surface_constraints) + " on this geometry (" +
+                std::to_string(RequestLimits::kMaxSurfaceConstraints) + ", and no more than its " + points +
+                "). Pin control points with vertex constraints instead (they cost nothing), or constrain fewer "
+                "surface points: a few well-spread points hold a surface as firmly as many");
+  }
+  if (request.vertex_constraints.size() > limits.vertex_constraints) {
+    return over("the request has " + std::to_string(request.vertex_constraints.size()) +
+                " vertex constraints; the geometry's " + points + " take at most " +
+                std::to_string(limits.vertex_constraints) + " (one per axis each); merge repeated ones");
+  }
+  if (request.forces.size() > limits.forces) {
+    return over("the request has " + std::to_string(request.forces.size()) + " forces; the geometry's " + points +
+                " take at most " + std::to_string(limits.forces) +
+                " (forces on one control point add up: send their sum once)");
+  }
+  if (request.surface_forces.size() > RequestLimits::kMaxSurfaceForces) {
+    return over("the request has " + std::to_string(request.surface_forces.size()) +
+                " surface forces; at most " + std::to_string(RequestLimits::kMaxSurfaceForces) +
+                " are taken per request (add up nearby ones, or use surface_load for a spread load)");
+  }
+  for (size_t k = 0; k < request.lagrange_constraints.size(); ++k) {
+    if (request.lagrange_constraints[k].indices.size() > limits.lagrange_terms) {
+      return over("Lagrange constraint " + std::to_string(k) + " has " +
+                  std::to_string(request.lagrange_constraints[k].indices.size()) +
+                  " terms, more than the geometry's " + points + "; combine the terms of repeated indices");
+    }
+  }
+  return {};
+}
+
+}  // namespace
+
 Result<void> validate_request(const DeformationRequest& request, const RequestContext& context) {
+  if (context.num_control_points != RequestContext::kUnknown) {
+    if (auto ok = check_counts(request, context.num_control_points); !ok) return ok;
+  }
   auto each = [&](const auto& elements) -> Result<void> {
     for (size_t k = 0; k < elements.size(); ++k) {
       if (auto ok = validate(elements[k], k, context); !ok) return ok;

@@ -1,4 +1,5 @@
 // Binary layouts of PROTOCOL.md (little-endian u32 / f32).
+#include <algorithm>
 #include <limits>
 #include <string>
 
@@ -244,7 +245,10 @@ Result<DeformationRequest> decode_request_binary(std::string_view body) {
       }
       c.index = index_u32(in, "the index of vertex constraint " + std::to_string(i));
     }
-    r.lagrange_constraints.resize(l);
+    // A constraint with no terms and zero values says nothing (PROTOCOL.md drops such an
+    // equation); it is dropped here, so padding a request with them costs neither memory nor
+    // the size of what is stored and served again.
+    r.lagrange_constraints.reserve(std::min<uint64_t>(l, in.remaining() / 16));
     for (uint32_t i = 0; i < l; ++i) {
       const uint32_t p = in.u32();
       // What must still follow: this constraint (16 p + 12) and the rest at their minimum sizes.
@@ -255,13 +259,14 @@ Result<DeformationRequest> decode_request_binary(std::string_view body) {
             " control points, which needs " + bytes(16 * uint64_t{p} + 12) + " more (plus " + bytes(rest) +
             " for what follows), but only " + bytes(in.remaining()) + " remain");
       }
-      auto& c = r.lagrange_constraints[i];
+      LagrangeConstraint c;
       c.indices.resize(p);
       c.coefficients.resize(p);
       const std::string name = "Lagrange constraint " + std::to_string(i);
       for (uint32_t j = 0; j < p; ++j) c.indices[j] = index_u32(in, "an index of " + name);
       for (uint32_t j = 0; j < p; ++j) c.coefficients[j] = finite_vec3(in, "a coefficient of " + name);
       c.values = finite_vec3(in, "a value of " + name);
+      if (p > 0 || c.values != Vec3::Zero()) r.lagrange_constraints.push_back(std::move(c));
     }
     if (in.remaining() < 16 * uint64_t{f}) {
       bad("the " + std::to_string(f) + " forces need " + bytes(16 * uint64_t{f}) + ", but only " +

@@ -624,7 +624,8 @@ Result<DeformationRequest> decode_request_json(std::string_view body) {
           lc.coefficients.push_back(vec3(coef[k], item(join(path, "coefficients"), k)));
         }
         if (const json* v = find(c, "values")) lc.values = vec3(*v, join(path, "values"));
-        r.lagrange_constraints.push_back(std::move(lc));
+        // No terms and zero values: says nothing, dropped (as in the binary decoder).
+        if (!lc.indices.empty() || lc.values != Vec3::Zero()) r.lagrange_constraints.push_back(std::move(lc));
       }
     }
     if (const json* list = find(root, "forces")) {

@@ -37,7 +37,7 @@ std::string_view endpoint_name(Endpoint e) { return kEndpointNames[static_cast<s
 Context::Context(std::shared_ptr<service::Service> s, ServerOptions o)
     : service(std::move(s)),
       options(std::move(o)),
-      json_gate(options.max_json_decode_bytes ? options.max_json_decode_bytes : 4 * options.max_body_bytes) {}
+      json_gate(options.max_json_decode_bytes ? options.max_json_decode_bytes : size_t{1} << 30) {}
 
 GeomId parse_id(std::string_view text) { return value_or_throw(GeomId::from_hex(text)); }
 

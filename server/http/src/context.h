@@ -97,22 +97,30 @@ double wait_seconds(const httplib::Request& req, const ServerOptions& options);
 /// "model" field, or an unknown model, is a 400.
 void apply_model_param(const httplib::Request& req, DeformationRequest& request);
 
-// Decodes a body in `format`, bounding the JSON bodies decoded at once (507 beyond).
+// Decodes a body in `format`, bounding the memory of the JSON bodies decoded at once (413 for a
+// body that alone would take more than the whole budget, 507 while others take it).
 template <class T>
 T decode(Context& c, const httplib::Request& req, wire::Format format, Result<T> (*binary)(std::string_view),
          Result<T> (*json)(std::string_view)) {
   if (format == wire::Format::kBinary) return value_or_throw(binary(req.body));
-  const size_t bytes = req.body.size();
-  if (!c.json_gate.enter(bytes)) {
+  const size_t cost = req.body.size() * ServerOptions::kJsonDecodeFactor;
+  if (cost > c.json_gate.budget()) {
+    throw Exception(ErrorCode::kPayloadTooLarge,
+                    "a JSON body of " + mib(req.body.size()) + " is larger than this server decodes (" +
+                        mib(c.json_gate.budget() / ServerOptions::kJsonDecodeFactor) +
+                        "; JSON takes about " + std::to_string(ServerOptions::kJsonDecodeFactor) +
+                        " times its size while parsed): send the binary layout, or split the request");
+  }
+  if (!c.json_gate.enter(cost)) {
     throw Exception(ErrorCode::kResourceExhausted,
                     "the server is decoding other large JSON bodies right now; retry shortly or send the binary "
                     "format");
   }
   struct Leave {
     JsonGate& gate;
-    size_t bytes;
-    ~Leave() { gate.leave(bytes); }
-  } leave{c.json_gate, bytes};
+    size_t cost;
+    ~Leave() { gate.leave(cost); }
+  } leave{c.json_gate, cost};
   return value_or_throw(json(req.body));
 }
 

@@ -11,6 +11,7 @@
 #include <algorithm>
 
 #include "service_impl.h"
+#include "softshell/request_validation.h"
 #include "softshell/wire.h"
 
 namespace softshell::service {
@@ -165,7 +166,7 @@ bool Service::Impl::claim_hold_solve_locked(Entry& e) {
 }
 
 void Service::Impl::launch_hold_solve(const std::shared_ptr<Entry>& e) {
-  solve_pool.submit([this, e] { run_hold_solve(e); });
+  solve_pool.submit([this, e] { run_hold_solve(e); }, e.get());
 }
 
 void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
@@ -410,6 +411,24 @@ Result<HoldTicket> Service::put_hold(const GeomId& id, const std::string& hold_i
                          " live holds, the most one geometry takes; hold '" + hold_id +
                          "' was not created: release a hold (DELETE) or let its lease lapse, or update an "
                          "existing hold instead of creating a new one"};
+      }
+      // The hold state solves every hold's constraints at once: together they stay within what
+      // one request may have (RequestLimits), or the solve would be as heavy as such a request.
+      size_t surface = version->request.lagrange_constraints.size() + version->request.limit_constraints.size();
+      for (const auto& [other_id, other] : t.live) {
+        if (other_id != hold_id && other.newest) {
+          surface += other.newest->request.lagrange_constraints.size() + other.newest->request.limit_constraints.size();
+        }
+      }
+      const size_t most = RequestLimits::for_control_points(e->geometry->mesh.num_vertices()).surface_constraints;
+      if (surface > most) {
+        impl_->hold_conflicts.fetch_add(1);
+        return Error{ErrorCode::kConflict,
+                     "with hold '" + hold_id + "' the holds of geometry " + id.hex() + " would have " +
+                         std::to_string(surface) + " Lagrange and limit constraints together, more than the " +
+                         std::to_string(most) +
+                         " one solve takes; the hold was not changed: use fewer surface points, pin control points "
+                         "with vertex constraints instead, or release other holds"};
       }
       if (it == t.live.end()) {
         LiveHold h;

@@ -4,6 +4,10 @@
 //
 // The queue posts one runner per free slot; a runner takes tasks until the queue is empty, so
 // the executor sees at most `limit` of this queue's runners and never a blocked thread.
+//
+// Fairness: tasks carry a key (the geometry they work for) and are taken round-robin over the
+// keys with queued tasks, in each key's arrival order. A client that queues a hundred solves on
+// one geometry delays another geometry's next solve by at most one task per slot, not by all.
 
 #include <algorithm>
 #include <condition_variable>
@@ -11,6 +15,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <unordered_map>
 
 #include "softshell/executor.h"
 
@@ -27,14 +32,17 @@ class TaskQueue {
   // Queues a task. After shutdown() began, the task runs on the calling thread (tasks are
   // written to notice the shutdown and finish quickly), so nothing is ever dropped. Callers hold
   // no lock the task takes.
-  void submit(std::function<void()> task) {
+  void submit(std::function<void()> task, const void* key = nullptr) {
     bool post_runner = false, run_here = false;
     {
       std::lock_guard lock(mu_);
       if (stopping_) {
         run_here = true;
       } else {
-        tasks_.push_back(std::move(task));
+        auto& queue = by_key_[key];
+        if (queue.empty()) turns_.push_back(key);
+        queue.push_back(std::move(task));
+        ++queued_;
         if (runners_ < limit_) {
           ++runners_;
           post_runner = true;
@@ -50,7 +58,7 @@ class TaskQueue {
   void shutdown() {
     std::unique_lock lock(mu_);
     stopping_ = true;
-    idle_.wait(lock, [&] { return runners_ == 0 && tasks_.empty(); });
+    idle_.wait(lock, [&] { return runners_ == 0 && queued_ == 0; });
   }
 
  private:
@@ -59,15 +67,26 @@ class TaskQueue {
       std::function<void()> task;
       {
         std::lock_guard lock(mu_);
-        if (tasks_.empty()) {
+        if (queued_ == 0) {
           --runners_;
           // Notified under the lock: once it is released, shutdown() may return and the queue
           // be destroyed; this runner touches nothing after that.
           if (runners_ == 0) idle_.notify_all();
           return;
         }
-        task = std::move(tasks_.front());
-        tasks_.pop_front();
+        // The key whose turn it is gives its oldest task and, if it has more, goes to the back.
+        const void* key = turns_.front();
+        turns_.pop_front();
+        auto it = by_key_.find(key);
+        if (it == by_key_.end() || it->second.empty()) continue;  // cannot happen: turns_ names queued keys
+        task = std::move(it->second.front());
+        it->second.pop_front();
+        --queued_;
+        if (it->second.empty()) {
+          by_key_.erase(it);
+        } else {
+          turns_.push_back(key);
+        }
       }
       task();
     }
@@ -77,7 +96,9 @@ class TaskQueue {
   const size_t limit_;
   std::mutex mu_;
   std::condition_variable idle_;
-  std::deque<std::function<void()>> tasks_;
+  std::unordered_map<const void*, std::deque<std::function<void()>>> by_key_;  // keys with queued tasks
+  std::deque<const void*> turns_;  // each key of by_key_ once, next turn first
+  size_t queued_ = 0;
   size_t runners_ = 0;  // runners posted and not finished
   bool stopping_ = false;
 };
