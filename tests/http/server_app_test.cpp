@@ -9,9 +9,11 @@
 
 #include <chrono>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "http_test_support.h"
+#include "sse_client.h"
 
 namespace softshell {
 namespace {
@@ -160,7 +162,7 @@ TEST(ServerAppTest, OptionFormsVersionAndEnvironment) {
   for (const char* env : {"SOFTSHELL_HOST", "SOFTSHELL_PORT", "SOFTSHELL_THREADS", "SOFTSHELL_SOLVE_THREADS",
                           "SOFTSHELL_PRECOMPUTE_JOBS", "SOFTSHELL_CACHE_MB", "SOFTSHELL_STORE_MB", "SOFTSHELL_MAX_BODY_MB",
                           "SOFTSHELL_MAX_CONNECTIONS", "SOFTSHELL_EVENT_WRITERS", "SOFTSHELL_MAX_HOLDS",
-                          "SOFTSHELL_LOG_LEVEL"}) {
+                          "SOFTSHELL_SHUTDOWN_TIMEOUT", "SOFTSHELL_LOG_LEVEL"}) {
     EXPECT_NE(text.find(env), std::string::npos) << env;
   }
 
@@ -227,6 +229,56 @@ TEST(ServerAppTest, MaxHoldsLimitsTheLiveHoldsOfAGeometry) {
   Child bad({SOFTSHELL_SERVER_EXE, "--max-holds=0"});
   EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
   EXPECT_NE(bad.drain_stderr().find("--max-holds"), std::string::npos);
+}
+
+// A stop finishes what runs within --shutdown-timeout and then exits anyway; a second signal
+// exits at once. What holds the stop here: a client that asked for large answers and reads
+// none of them, so the server's write waits on a full socket (for up to its 30 s I/O timeout).
+TEST(ServerAppTest, StopHasADeadlineAndASecondSignalStopsAtOnce) {
+  for (const bool second_signal : {false, true}) {
+    Child server({SOFTSHELL_SERVER_EXE, "--port=0", "--threads=1", "--log-level=warning", "--shutdown-timeout",
+                  second_signal ? "600" : "1"});
+    const std::string out = server.read_until("\n", std::chrono::seconds(30));
+    const int port = port_of(out.substr(0, out.find('\n')));
+    ASSERT_GT(port, 0) << out;
+    std::string result_path;
+    {
+      httplib::Client c("127.0.0.1", port);
+      c.set_read_timeout(std::chrono::seconds(60));
+      auto up = c.Post("/geometries", wire::encode_geometry_binary(exact_grid(40), exact_material()).value(), kBin);
+      ASSERT_TRUE(up);
+      ASSERT_EQ(up->status, 201);
+      const std::string base = "/geometries/" + wire::decode_upload_response_binary(up->body, true).value().id.hex();
+      auto solved = c.Post(base + "/results", wire::encode_request_json(pinned_push(1, 40)), kJson);
+      ASSERT_TRUE(solved);
+      ASSERT_EQ(solved->status, 200) << solved->body;
+      result_path = base + "/results/1";
+    }
+    const int fd = connect_loopback(port, /*rcvbuf=*/4096);
+    ASSERT_GE(fd, 0);
+    std::string pipelined;
+    for (int i = 0; i < 64; ++i) pipelined += "GET " + result_path + " HTTP/1.1\r\nHost: x\r\nAccept: application/json\r\n\r\n";
+    ASSERT_EQ(::send(fd, pipelined.data(), pipelined.size(), MSG_NOSIGNAL), static_cast<ssize_t>(pipelined.size()));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the server's writes fill the socket
+
+    const auto start = std::chrono::steady_clock::now();
+    kill(server.pid(), SIGTERM);
+    if (second_signal) {
+      EXPECT_EQ(server.wait(std::chrono::seconds(1)), -1) << "the stop should still wait for the blocked answer";
+      kill(server.pid(), SIGTERM);
+    }
+    EXPECT_EQ(server.wait(std::chrono::seconds(20)), 1);
+    // Well before the 30 s the blocked write would take.
+    EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(20));
+    const std::string log = server.drain_stderr();
+    EXPECT_NE(log.find(second_signal ? "received SIGTERM again" : "the shutdown timeout passed"), std::string::npos)
+        << log;
+    EXPECT_NE(log.find("1 connection(s) still busy"), std::string::npos) << log;
+    ::close(fd);
+  }
+  Child bad({SOFTSHELL_SERVER_EXE, "--shutdown-timeout=-1"});
+  EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
+  EXPECT_NE(bad.drain_stderr().find("--shutdown-timeout"), std::string::npos);
 }
 
 TEST(ServerAppTest, BusyPortIsAnError) {

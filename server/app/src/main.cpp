@@ -1,4 +1,7 @@
 // softshell-server: the simulation service of PROTOCOL.md over HTTP.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -31,8 +34,10 @@ constexpr const char* kDescription =
 
 constexpr const char* kFooter =
     "The server prints \"softshell-server listening on http://HOST:PORT\" once it accepts requests and\n"
-    "stops cleanly on SIGINT or SIGTERM (waiting long polls and hold changes are answered, event\n"
-    "streams end after the event they are sending, running solves finish).\n";
+    "stops cleanly on SIGINT or SIGTERM: new requests and those waiting (long polls, hold changes,\n"
+    "precomputations) are answered 503, running nonlinear solves and precomputations are cancelled,\n"
+    "event streams end after the event they are sending and answers being sent finish, within\n"
+    "--shutdown-timeout; then, or at a second signal, it exits at once (status 1).\n";
 
 // What the command line sets (the defaults are the service's own where none is written here).
 struct Options {
@@ -43,10 +48,12 @@ struct Options {
   int precompute_jobs = 1;
   size_t cache_mb = 0, store_mb = 0, max_body_mb = 0;
   int max_connections = 0;
+  int max_connections_per_address = -1;  // -1: a quarter of --max-connections
   int event_writers = 0;
   size_t max_holds = 0;
   std::vector<std::string> cors_origins;
   std::string log_level = "info";
+  double shutdown_timeout = 5.0;
 };
 
 // Ranges are checked by CLI11; the help shows them in the text, so the validators stay unnamed.
@@ -81,6 +88,12 @@ void add_options(CLI::App& app, Options& o) {
                  "are served by the event writers and limited by the descriptor\n"
                  "limit and --store-mb")
       ->envname("SOFTSHELL_MAX_CONNECTIONS")->type_name("N")->check(range(8, 32768));
+  app.add_option("--max-connections-per-address", o.max_connections_per_address,
+                 "connections one client address may have open at once, 0..32768\n"
+                 "(default: a quarter of --max-connections; 0 = no limit, for a\n"
+                 "proxy on the same host, where every client has its address);\n"
+                 "beyond it a connection gets 503")
+      ->envname("SOFTSHELL_MAX_CONNECTIONS_PER_ADDRESS")->type_name("N")->check(range(0, 32768));
   app.add_option("--event-writers", o.event_writers,
                  "threads writing event streams, 1..64 (default: half the cores,\nat least 1)")
       ->envname("SOFTSHELL_EVENT_WRITERS")->type_name("N")->check(range(1, 64));
@@ -93,6 +106,10 @@ void add_options(CLI::App& app, Options& o) {
                  "let pages from origin O (e.g. http://localhost:3000, or *) call\n"
                  "the API (CORS); repeatable; off by default")
       ->envname("SOFTSHELL_CORS_ORIGIN")->type_name("O")->allow_extra_args(false);
+  app.add_option("--shutdown-timeout", o.shutdown_timeout,
+                 "seconds a stop may take to finish what is running, 0..3600\n"
+                 "(default 5); then the server exits anyway")
+      ->envname("SOFTSHELL_SHUTDOWN_TIMEOUT")->type_name("S")->check(CLI::Range(0.0, 3600.0).description(""));
   app.add_option("--log-level", o.log_level,
                  "debug, info, warning, error or off (default info); info logs one\n"
                  "line per request: method, path, status, microseconds")
@@ -137,6 +154,8 @@ int main(int argc, char** argv) {
   if (o.max_body_mb > 0) http_options.max_body_bytes = o.max_body_mb << 20;
   if (o.max_connections > 0) http_options.max_connections = o.max_connections;
   if (o.event_writers > 0) http_options.event_writers = o.event_writers;
+  http_options.max_connections_per_address =
+      o.max_connections_per_address >= 0 ? o.max_connections_per_address : std::max(1, http_options.max_connections / 4);
   if (o.max_holds > 0) service_options.max_holds_per_geometry = o.max_holds;
   http_options.cors_origins = o.cors_origins;
   const service::LogLevel level = service::parse_log_level(o.log_level).value();  // checked above
@@ -178,9 +197,29 @@ int main(int argc, char** argv) {
 
   int received = 0;
   sigwait(&signals, &received);
-  logger.info(std::string("received ") + (received == SIGINT ? "SIGINT" : "SIGTERM") + ", stopping");
-  server.stop();
-  svc->shutdown();
+  const auto name = [](int sig) { return std::string(sig == SIGINT ? "SIGINT" : "SIGTERM"); };
+  logger.info("received " + name(received) + ", stopping (at most " + std::to_string(o.shutdown_timeout) +
+              " s; a second signal stops at once)");
+  // The service stops first: what waits for it is answered and long work is cancelled, so the
+  // connections it held can finish. Then the HTTP server ends its connections and streams.
+  std::atomic<bool> stopped{false};
+  std::thread stopper([&] {
+    svc->shutdown();
+    server.stop();
+    stopped.store(true);
+  });
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.shutdown_timeout);
+  while (!stopped.load()) {
+    const timespec tick{0, 20'000'000};
+    const int again = sigtimedwait(&signals, nullptr, &tick);
+    const bool late = std::chrono::steady_clock::now() >= deadline;
+    if (again > 0 || late) {
+      logger.error(std::string(again > 0 ? "received " + name(again) + " again" : "the shutdown timeout passed") +
+                   ": exiting with " + std::to_string(server.busy_connections()) + " connection(s) still busy");
+      std::_Exit(1);  // what still runs is abandoned; every answer already sent stands
+    }
+  }
+  stopper.join();
   logger.info("stopped");
   return 0;
 }

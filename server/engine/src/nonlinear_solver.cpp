@@ -406,6 +406,7 @@ bool Run::solve_step(double lambda, double tolerance) {
   }
   double first_out = 0.0, previous = 1.0, eta_cap = 1e-3;
   for (int it = 0;; ++it) {
+    if (options_.cancel && options_.cancel->load()) fail(ErrorCode::kCancelled, "the nonlinear solve was cancelled");
     const Eigen::VectorXd r = residual(state_, lambda);
     const Eigen::VectorXd g = row_residual(u_, lambda);
     const double out = reactions_->out_of_balance(r).norm(), scale = force_scale(state_, lambda);

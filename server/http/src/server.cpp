@@ -130,6 +130,9 @@ struct HttpServer::Impl {
     server.read_timeout = options.io_timeout;
     server.write_timeout = options.io_timeout;
     server.keep_alive_timeout = options.keep_alive_timeout;
+    server.head_timeout = options.head_timeout;
+    server.max_head_bytes = std::max<size_t>(options.max_head_bytes, 1024);
+    server.max_connections_per_address = options.max_connections_per_address;
     server.set_tcp_nodelay(true);
     // cpp-httplib's default also sets SO_REUSEPORT, which lets a second server bind the same port
     // and silently take half of the connections (and so half of the geometries' clients). Only
@@ -143,6 +146,7 @@ struct HttpServer::Impl {
     // answer instead of the 100 (the library would ask for a body of any size).
     server.set_expect_100_continue_handler([this](const httplib::Request& req, httplib::Response& res) {
       t_request = RequestContext{Clock::now(), Endpoint::kUnmatched, true};
+      if (internal::Connection* c = internal::current_connection()) c->head_complete();
       const auto refusal = refuse_body(req, ctx.options.max_body_bytes);
       if (!refusal) return 100;
       answer_refusal(*refusal, res);
@@ -153,6 +157,7 @@ struct HttpServer::Impl {
     server.set_pre_routing_handler(
         httplib::Server::HandlerWithResponse([this](const httplib::Request& req, httplib::Response& res) {
           t_request = RequestContext{Clock::now(), Endpoint::kUnmatched, true};
+          if (internal::Connection* c = internal::current_connection()) c->head_complete();
           res.set_header("Server", internal::kServerHeader);  // kept by every handler and error page
           if (const auto refusal = refuse_body(req, ctx.options.max_body_bytes)) {
             answer_refusal(*refusal, res);

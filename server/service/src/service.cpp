@@ -221,7 +221,9 @@ void Service::Impl::finish_precompute(const std::shared_ptr<Entry>& e,
       e->model = std::move(*model);
       solver = std::make_shared<const engine::Solver>(e->model, cache);
       e->solver = solver;
-      e->nonlinear = std::make_shared<const engine::NonlinearSolver>(e->model, cache);
+      engine::NonlinearOptions nonlinear_options;
+      nonlinear_options.cancel = &stopping;  // a shutdown stops a long nonlinear solve
+      e->nonlinear = std::make_shared<const engine::NonlinearSolver>(e->model, cache, nonlinear_options);
       precompute_hist.observe(seconds);  // before the status is visible: stats never lag it
       e->status = GeometryStatus::kReady;
       const size_t actual = mesh_bytes(e->geometry->mesh) + e->model->memory_bytes();
@@ -324,7 +326,7 @@ void Service::Impl::submit_solve(const std::shared_ptr<Entry>& e, std::shared_pt
     if (!displacement) {
       solves_failed.fetch_add(1);
       Error err = displacement.error();
-      if (err.code == ErrorCode::kCancelled) err.code = ErrorCode::kUnavailable;
+      if (err.code == ErrorCode::kCancelled) err = shutdown_error();  // only a shutdown cancels a solve
       if (err.code == ErrorCode::kInternal) options.logger.error("solve failed: " + err.message);
       done(std::move(err));
       return;
@@ -346,7 +348,7 @@ void Service::Impl::submit_solve(const std::shared_ptr<Entry>& e, std::shared_pt
       solve_hist.observe(seconds);
     });
     done(std::move(kept));
-  });
+  }, e.get());  // round-robin over the geometries with queued solves
 }
 
 Service::Service(ServiceOptions options) : options_(std::move(options)), impl_(std::make_unique<Impl>(options_)) {}

@@ -3,6 +3,7 @@
 /// \brief `NonlinearSolver`: equilibrium of the geometrically nonlinear Kirchhoff-Love shell
 /// (large displacements and rotations, small strains; PROTOCOL.md "The nonlinear model").
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -42,6 +43,9 @@ struct NonlinearOptions {
   /// tangent and the residual the model's rule; a coarser rule only makes refreshing the
   /// preconditioner cheaper. Range 0..10.
   int tangent_gauss_points = 4;
+  /// If set and it becomes true, a running solve stops at its next iteration with kCancelled
+  /// (a server shutting down; the flag must outlive the solver).
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 /// What a nonlinear solve did.

@@ -30,11 +30,14 @@ namespace softshell::http {
 
 /// Configuration of an `HttpServer`.
 struct ServerOptions {
+  /// What decoding a JSON body takes, in multiples of its size (see max_json_decode_bytes).
+  static constexpr size_t kJsonDecodeFactor = 40;
   /// Largest request body (bytes); larger bodies get 413.
   size_t max_body_bytes = size_t{64} << 20;
-  /// JSON bodies being decoded at once may total at most this many bytes (a JSON body takes up
-  /// to ~20x its size while parsed); beyond it a request gets 507 and may retry. 0 = 4 x
-  /// max_body_bytes.
+  /// Memory that JSON bodies being decoded at once may take. A JSON body takes up to
+  /// `kJsonDecodeFactor` times its size while parsed (measured: 33.7x for 50 MB of constraints),
+  /// so one whose decoding alone would take more than this gets 413 (send the binary layout);
+  /// beyond it, while others are decoded, a request gets 507 and may retry. 0 = 1 GiB.
   size_t max_json_decode_bytes = 0;
   /// Open connections served at once (one I/O thread each); more wait to be accepted.
   int max_connections = 1024;
@@ -46,6 +49,14 @@ struct ServerOptions {
   std::chrono::seconds keep_alive_timeout{5};
   /// Time allowed to receive a request and to send a response.
   std::chrono::seconds io_timeout{30};
+  /// A request's line and headers must arrive within this time (408 otherwise) and this size
+  /// (431 otherwise), so slow or endless senders hold an I/O thread for seconds only.
+  std::chrono::milliseconds head_timeout{10000};
+  size_t max_head_bytes = 64 * 1024;
+  /// Connections one client address may have open at once (0: no limit); beyond it a connection
+  /// gets 503 with `Retry-After: 1`, so one client cannot take every I/O thread. Behind a proxy
+  /// on the same host every client has the proxy's address: leave it 0 and limit at the proxy.
+  int max_connections_per_address = 0;
   /// An I/O thread idle this long exits (at least 8 are kept), so a burst of clients leaves no
   /// crowd of idle threads behind.
   std::chrono::milliseconds idle_thread_exit{30000};
