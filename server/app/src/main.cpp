@@ -16,6 +16,7 @@
 #pragma GCC diagnostic ignored "-Wnull-dereference"
 #include <CLI/CLI.hpp>
 
+#include "softshell/http/auth.h"
 #include "softshell/http/server.h"
 #include "softshell/service/log.h"
 #include "softshell/service/service.h"
@@ -47,6 +48,7 @@ struct Options {
   size_t max_holds = 0;
   std::vector<std::string> cors_origins;
   std::string log_level = "info";
+  std::string auth_token_file;
 };
 
 // Ranges are checked by CLI11; the help shows them in the text, so the validators stay unnamed.
@@ -98,6 +100,12 @@ void add_options(CLI::App& app, Options& o) {
                  "line per request: method, path, status, microseconds")
       ->envname("SOFTSHELL_LOG_LEVEL")->type_name("LEVEL")
       ->check(CLI::IsMember({"debug", "info", "warning", "error", "off"}, CLI::ignore_case).description(""));
+  app.add_option("--auth-token-file", o.auth_token_file,
+                 "file holding an access token (16+ visible ASCII characters,\n"
+                 "e.g. from `openssl rand -hex 32`): every request but GET /health\n"
+                 "and the browser app's files then needs 'Authorization: Bearer\n"
+                 "<token>' (401 otherwise); off by default")
+      ->envname("SOFTSHELL_AUTH_TOKEN_FILE")->type_name("FILE");
 }
 
 // Parses the command line; returns the exit status when the program should stop now (help,
@@ -139,12 +147,23 @@ int main(int argc, char** argv) {
   if (o.event_writers > 0) http_options.event_writers = o.event_writers;
   if (o.max_holds > 0) service_options.max_holds_per_geometry = o.max_holds;
   http_options.cors_origins = o.cors_origins;
+  std::vector<std::string> token_warnings;
+  if (!o.auth_token_file.empty()) {
+    auto token = http::read_auth_token_file(o.auth_token_file);
+    if (!token) {
+      std::cerr << "softshell-server: --auth-token-file: " << token.error().message << "\n";
+      return 2;
+    }
+    http_options.auth_token = std::move(token->token);
+    token_warnings = std::move(token->warnings);
+  }
   const service::LogLevel level = service::parse_log_level(o.log_level).value();  // checked above
 
   const service::Logger logger{level, service::stderr_log_sink()};
   set_log_sink(logger.sink, level);  // the SDK's own reports (internal errors, failed assertions)
   service_options.logger = logger;
   http_options.logger = logger;
+  for (const std::string& w : token_warnings) logger.warning(w);
   http_options.reserved_connections = std::min(http_options.reserved_connections, http_options.max_connections / 2);
 
   // Every open connection and event stream is a descriptor: the soft limit (often 1024) is
