@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <pthread.h>
+#include <semaphore.h>
 #include <sys/resource.h>
 
 // GCC 12 reports a potential null dereference inside CLI11's own string splitting
@@ -22,6 +23,14 @@
 #include "softshell/service/service.h"
 
 namespace {
+
+// The stop signal (SIGINT or SIGTERM), set by its handler, which posts g_stop (async-signal-safe).
+volatile std::sig_atomic_t g_signal = 0;
+sem_t g_stop;
+void on_stop_signal(int number) {
+  g_signal = number;
+  sem_post(&g_stop);
+}
 
 constexpr const char* kDescription =
     "Serves the softshell HTTP API (PROTOCOL.md): clients upload Catmull-Clark control meshes, the\n"
@@ -174,8 +183,18 @@ int main(int argc, char** argv) {
     ::setrlimit(RLIMIT_NOFILE, &files);
   }
 
-  // SIGINT and SIGTERM are taken by sigwait below; every thread created from here on inherits
-  // the blocked mask, so no worker is interrupted by them.
+  // SIGINT and SIGTERM: every thread created from here on inherits the blocked mask, so no worker
+  // is interrupted by them. Threads a library started before main (OpenBLAS's pool) do not block
+  // them and may be the ones they are delivered to, so sigwait alone is not enough (the default
+  // action would kill the process there): a handler that only records the signal takes them on
+  // whichever thread, and the main thread unblocks them once the server runs.
+  struct sigaction stop_action {};
+  stop_action.sa_handler = on_stop_signal;
+  stop_action.sa_flags = SA_RESTART;
+  sigemptyset(&stop_action.sa_mask);
+  sem_init(&g_stop, 0, 0);
+  sigaction(SIGINT, &stop_action, nullptr);
+  sigaction(SIGTERM, &stop_action, nullptr);
   sigset_t signals;
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
@@ -195,8 +214,10 @@ int main(int argc, char** argv) {
               *bound);
   std::fflush(stdout);
 
-  int received = 0;
-  sigwait(&signals, &received);
+  pthread_sigmask(SIG_UNBLOCK, &signals, nullptr);  // (the handler runs here or on a library's thread)
+  while (sem_wait(&g_stop) != 0) {
+  }
+  const int received = g_signal;
   logger.info(std::string("received ") + (received == SIGINT ? "SIGINT" : "SIGTERM") + ", stopping");
   server.stop();
   svc->shutdown();
