@@ -41,6 +41,7 @@ namespace Softshell
         Cancelled = 9,
         IoError = 10,               // a file could not be read or written
         Internal = 11,              // a bug in softshell; please report it
+        Conflict = 12,              // contradicts other clients' holds (HTTP 409)
         BufferTooSmall = 100,       // capacity below the count
         NotReady = 101,             // an asynchronous operation has not finished
     }
@@ -158,6 +159,10 @@ namespace Softshell
         public int request_timeout_ms;
         public int binary;
         public int async_threads;
+        /// <summary>NUL-terminated UTF-8 access token (a server's --auth-token-file), or IntPtr.Zero
+        /// for none; copied by ss_session_create_remote, so the caller frees it afterwards (e.g.
+        /// Marshal.StringToCoTaskMemUTF8 / Marshal.FreeCoTaskMem).</summary>
+        public IntPtr auth_token;
     }
 
     [StructLayout(LayoutKind.Sequential)]
@@ -215,7 +220,7 @@ namespace Softshell
     {
         /// <summary>libsoftshell_plugin.so / softshell_plugin.dll / libsoftshell_plugin.dylib.</summary>
         public const string Lib = "softshell_plugin";
-        public const uint AbiVersion = 2;
+        public const uint AbiVersion = 3;
         public const int Mask_X = 1, Mask_Y = 2, Mask_Z = 4, Mask_All = 7;
         public const int ForceTransferSubdivide = 0, ForceTransferVirtualWork = 1;
         public const int BoundaryEdgeAndCorner = 0, BoundaryNone = 1;

@@ -122,7 +122,8 @@ static class SoftshellSmoke
         Check(Marshal.SizeOf(typeof(LimitSample)) == 96 && Marshal.SizeOf(typeof(Pick)) == 184, "LimitSample/Pick size");
         Check(Marshal.OffsetOf(typeof(Pick), "t").ToInt32() == 152 && Marshal.OffsetOf(typeof(Pick), "iterations").ToInt32() == 176, "Pick offsets");
         Check(Marshal.SizeOf(typeof(GrabOptions)) == 8 && Marshal.SizeOf(typeof(FloorOptions)) == 16, "option sizes");
-        Check(Marshal.SizeOf(typeof(RemoteOptions)) == 16 && Marshal.SizeOf(typeof(GeometryStatus)) == 24, "RemoteOptions/GeometryStatus size");
+        Check(Marshal.SizeOf(typeof(RemoteOptions)) == 16 + IntPtr.Size && Marshal.OffsetOf(typeof(RemoteOptions), "auth_token").ToInt32() == 16 &&
+              Marshal.SizeOf(typeof(GeometryStatus)) == 24, "RemoteOptions/GeometryStatus size");
         Check(Marshal.SizeOf(typeof(EmbeddedOptions)) == 80 && Marshal.OffsetOf(typeof(EmbeddedOptions), "http_host").ToInt32() == 16,
               "EmbeddedOptions layout");
 

@@ -1,6 +1,13 @@
 // EmbeddedSession and RemoteSession: the same script gives the same results through both.
 #include <gtest/gtest.h>
 
+#include <arpa/inet.h>
+#include <ifaddrs.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cstdio>
 #include <thread>
 
 #include "http_test_support.h"
@@ -186,6 +193,68 @@ TEST(EmbeddedSessionTest, ListenerLetsOtherDevicesJoin) {
   EXPECT_EQ(app.port(), 0);
   EXPECT_TRUE(app.deform(id, pinned_push(1)));  // still works in-process
   EXPECT_FALSE(RemoteSession::connect("http://127.0.0.1:" + std::to_string(*port)));
+}
+
+// Whether a TCP connection to `address:port` (IPv4, in network order) is accepted.
+bool accepts(in_addr address, int port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return false;
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(static_cast<uint16_t>(port));
+  to.sin_addr = address;
+  const bool ok = ::connect(fd, reinterpret_cast<const sockaddr*>(&to), sizeof to) == 0;
+  ::close(fd);
+  return ok;
+}
+
+// listen() with its defaults binds 127.0.0.1 only, as softshell-server does: the port is closed
+// on every other address of this machine. With ServerOptions::auth_token it wants the token.
+TEST(EmbeddedSessionTest, ListenDefaultsToLoopbackAndTakesAToken) {
+  EmbeddedSession app(test_service_options());
+  auto port = app.listen();
+  ASSERT_TRUE(port) << port.error().message;
+  in_addr loopback{};
+  loopback.s_addr = htonl(INADDR_LOOPBACK);
+  EXPECT_TRUE(accepts(loopback, *port));
+  int others = 0;
+  ifaddrs* list = nullptr;
+  ASSERT_EQ(::getifaddrs(&list), 0);
+  for (const ifaddrs* a = list; a; a = a->ifa_next) {
+    if (!a->ifa_addr || a->ifa_addr->sa_family != AF_INET) continue;
+    const in_addr address = reinterpret_cast<const sockaddr_in*>(a->ifa_addr)->sin_addr;
+    if ((ntohl(address.s_addr) >> 24) == 127) continue;
+    ++others;
+    char text[INET_ADDRSTRLEN] = {};
+    ::inet_ntop(AF_INET, &address, text, sizeof text);
+    EXPECT_FALSE(accepts(address, *port)) << "the default listener answers on " << text;
+  }
+  ::freeifaddrs(list);
+  if (others == 0) std::printf("note: no non-loopback IPv4 address here; only 127.0.0.1 was checked\n");
+
+  EmbeddedSession shared(test_service_options());
+  http::ServerOptions options;
+  options.auth_token = "embedded-token-0123456789";
+  auto shared_port = shared.listen("127.0.0.1", 0, options);
+  ASSERT_TRUE(shared_port) << shared_port.error().message;
+  const std::string url = "http://127.0.0.1:" + std::to_string(*shared_port);
+  const GeomId id = shared.upload(exact_grid(), exact_material()).value().id;
+  auto anonymous = RemoteSession::connect(url);
+  ASSERT_TRUE(anonymous) << anonymous.error().message;
+  auto refused = (*anonymous)->geometry_info(id);
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("auth_token"), std::string::npos) << refused.error().message;
+  RemoteSessionOptions with;
+  with.auth_token = options.auth_token;
+  auto device = RemoteSession::connect(url, with);
+  ASSERT_TRUE(device) << device.error().message;
+  auto info = (*device)->geometry_info(id);
+  ASSERT_TRUE(info) << info.error().message;
+  // A token the server would refuse is refused by listen().
+  EmbeddedSession weak(test_service_options());
+  http::ServerOptions short_token;
+  short_token.auth_token = "short";
+  EXPECT_FALSE(weak.listen("127.0.0.1", 0, short_token));
 }
 
 TEST(EmbeddedSessionTest, AsyncDeformationNeverBlocksTheCaller) {

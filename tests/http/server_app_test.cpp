@@ -4,10 +4,13 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
+#include <filesystem>
 #include <string>
 #include <thread>
 #include <vector>
@@ -286,6 +289,66 @@ TEST(ServerAppTest, BusyPortIsAnError) {
   Child server({SOFTSHELL_SERVER_EXE, "--host", "127.0.0.1", "--port", std::to_string(taken.port())});
   EXPECT_EQ(server.wait(std::chrono::seconds(15)), 1);
   EXPECT_NE(server.drain_stderr().find("cannot listen"), std::string::npos);
+}
+
+// --auth-token-file (and SOFTSHELL_AUTH_TOKEN_FILE): a bad file stops the start with the reason;
+// a good one makes every request but /health need the token; a file others can read is warned of.
+TEST(ServerAppTest, AuthTokenFile) {
+  char dir_template[] = "/tmp/softshell_app_auth_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  const std::string dir = dir_template;
+  auto write = [&](const std::string& name, const std::string& text, mode_t mode) {
+    const std::string path = dir + "/" + name;
+    FILE* f = std::fopen(path.c_str(), "wb");
+    std::fwrite(text.data(), 1, text.size(), f);
+    std::fclose(f);
+    chmod(path.c_str(), mode);
+    return path;
+  };
+  const std::string token = "app-token-0123456789abcdef";
+  const std::string good = write("good", token + "\n", 0600);
+  const std::string shared = write("shared", token + "\n", 0644);
+  for (const auto& [path, says] : std::vector<std::pair<std::string, std::string>>{
+           {dir + "/missing", "does not exist"},
+           {write("empty", "\n", 0600), "empty"},
+           {write("short", "0123456789\n", 0600), "at least 16"},
+           {write("spaced", "0123456789 0123456789\n", 0600), "visible ASCII"}}) {
+    Child bad({SOFTSHELL_SERVER_EXE, "--port=0", "--auth-token-file", path});
+    EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2) << path;
+    const std::string err = bad.drain_stderr();
+    EXPECT_NE(err.find("--auth-token-file"), std::string::npos) << err;
+    EXPECT_NE(err.find(says), std::string::npos) << err;
+    EXPECT_NE(err.find(path), std::string::npos) << err;
+  }
+  for (const bool from_env : {false, true}) {
+    std::vector<std::string> args{SOFTSHELL_SERVER_EXE, "--port=0", "--threads=1", "--log-level=warning"};
+    std::vector<std::pair<std::string, std::string>> env;
+    if (from_env) env.emplace_back("SOFTSHELL_AUTH_TOKEN_FILE", shared);
+    else args.insert(args.end(), {"--auth-token-file", good});
+    Child server(args, env);
+    const std::string out = server.read_until("\n", std::chrono::seconds(30));
+    const int port = port_of(out.substr(0, out.find('\n')));
+    ASSERT_GT(port, 0) << out << server.drain_stderr();
+    {
+      httplib::Client c("127.0.0.1", port);
+      auto health = c.Get("/health");
+      ASSERT_TRUE(health);
+      EXPECT_EQ(health->status, 200);
+      auto anonymous = c.Get("/geometries");
+      ASSERT_TRUE(anonymous);
+      EXPECT_EQ(anonymous->status, 401);
+      EXPECT_EQ(anonymous->get_header_value("WWW-Authenticate"), R"(Bearer realm="softshell")");
+      auto ok = c.Get("/geometries", {{"Authorization", "Bearer " + token}});
+      ASSERT_TRUE(ok);
+      EXPECT_EQ(ok->status, 200);
+    }
+    kill(server.pid(), SIGTERM);
+    EXPECT_EQ(server.wait(std::chrono::seconds(15)), 0);
+    const std::string log = server.drain_stderr();
+    // The shared file (0644) is warned of; the private one is not.
+    EXPECT_EQ(log.find("chmod 600") != std::string::npos, from_env) << log;
+  }
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

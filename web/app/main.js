@@ -4,7 +4,22 @@
 import { ApiError, Client, LimitSurface, parseObj, rows3 } from './client.js';
 import { View, vec } from './view.js';
 
-const client = new Client('');
+// The access token of a server started with --auth-token-file: opened as /#token=TOKEN (a
+// fragment never goes to the server nor into its logs), kept in this tab's sessionStorage and
+// taken out of the address bar, sent as the Authorization header.
+function accessToken() {
+  const fragment = new URLSearchParams(location.hash.slice(1));
+  const given = fragment.get('token');
+  if (given !== null) {
+    fragment.delete('token');
+    const rest = fragment.toString();
+    history.replaceState(null, '', location.pathname + location.search + (rest ? '#' + rest : ''));
+    if (given) sessionStorage.setItem('softshell.token', given);
+    else sessionStorage.removeItem('softshell.token');
+  }
+  return sessionStorage.getItem('softshell.token') || '';
+}
+const client = new Client('', { token: accessToken() });
 const root = document.getElementById('root');
 const params = new URLSearchParams(location.search);
 // One name per page (a browser tab, or a frame): the prefix of its hold ids. A reload is a new
@@ -29,6 +44,9 @@ function el(tag, attrs = {}, ...children) {
 }
 
 function message(err) {
+  if (err instanceof ApiError && err.status === 401) {
+    return `${err.message} (401 ${err.code}): open this page as ${location.origin}/#token=TOKEN with the server's token`;
+  }
   return err instanceof ApiError ? `${err.message} (${err.status} ${err.code})` : String(err?.message ?? err);
 }
 
@@ -543,7 +561,7 @@ async function viewPage(id) {
   window.addEventListener('pagehide', () => {
     // Let go of everything this tab holds (the leases would end it within 10 s anyway).
     for (const [holdId, s] of senders) {
-      if (s.last) fetch(`/geometries/${id}/holds/${holdId}`, { method: 'DELETE', keepalive: true }).catch(() => {});
+      if (s.last) fetch(`/geometries/${id}/holds/${holdId}`, { method: 'DELETE', keepalive: true, headers: client.authHeaders() }).catch(() => {});
     }
   });
 

@@ -457,10 +457,13 @@ function query(params) {
 export class Client {
   /**
    * @param {string} base  server URL ('' = the page's own origin)
-   * @param {{fetch?: Function, EventSource?: Function}} options  implementations to use
+   * @param {{fetch?: Function, EventSource?: Function, token?: string}} options  implementations to
+   *   use; `token`: the access token of a server started with --auth-token-file, sent as
+   *   `Authorization: Bearer <token>` on every request and event stream
    */
   constructor(base = '', options = {}) {
     this.base = base.replace(/\/$/, '');
+    this.token = options.token || '';
     this.fetch = options.fetch ?? globalThis.fetch.bind(globalThis);
     this.EventSource = options.EventSource === undefined ? globalThis.EventSource : options.EventSource;
     /** Milliseconds of the last request (from sending to the whole answer read). */
@@ -468,7 +471,7 @@ export class Client {
   }
 
   async request(method, path, { body, type, accept = JSON_TYPE, ok = [200, 201] } = {}) {
-    const headers = { Accept: accept };
+    const headers = { Accept: accept, ...this.authHeaders() };
     if (body !== undefined) headers['Content-Type'] = type;
     const start = performance.now();
     const res = await this.fetch(this.base + path, { method, headers, body });
@@ -480,6 +483,9 @@ export class Client {
     }
     return { status: res.status, data };
   }
+
+  /** `{Authorization: 'Bearer <token>'}` with a token, else `{}` (for requests made outside the client). */
+  authHeaders() { return this.token ? { Authorization: `Bearer ${this.token}` } : {}; }
 
   json(method, path, body, opts = {}) {
     return this.request(method, path, { body: body === undefined ? undefined : JSON.stringify(body), type: JSON_TYPE, ...opts });
@@ -592,9 +598,11 @@ export class Client {
    * Follows a geometry's results (GET .../events): `onResult({res_id, positions, holds})` for the
    * newest result newer than `have`, then for each new one. Reconnects by itself (resuming after
    * the last id it got) until `close()`. `onState('open' | 'reconnecting' | 'closed', error?)`.
-   * Uses EventSource where there is one (browsers), else fetch streaming (Node).
+   * Uses EventSource where there is one (browsers), else fetch streaming (Node); also fetch with a
+   * token, since EventSource cannot send the Authorization header (the server takes no token in
+   * the URL). A 401 ends the stream (`onState('closed', error)`): retrying cannot help.
    */
-  events(id, { have = 0, onResult, onState, retryMs = 500, useEventSource = !!this.EventSource } = {}) {
+  events(id, { have = 0, onResult, onState, retryMs = 500, useEventSource = !!this.EventSource && !this.token } = {}) {
     const url = (h) => `${this.base}/geometries/${hex(id)}/events` + query({ have: h });
     let last = have;
     let closed = false;
@@ -630,7 +638,7 @@ export class Client {
       }
       abort = new AbortController();
       try {
-        const res = await this.fetch(url(last), { headers: { Accept: 'text/event-stream', ...(last ? { 'Last-Event-ID': String(last) } : {}) }, signal: abort.signal });
+        const res = await this.fetch(url(last), { headers: { Accept: 'text/event-stream', ...this.authHeaders(), ...(last ? { 'Last-Event-ID': String(last) } : {}) }, signal: abort.signal });
         if (res.status !== 200) {
           const text = await res.text();
           let message = `events: HTTP ${res.status}`;
@@ -643,7 +651,13 @@ export class Client {
         }
         retry(new Error('the event stream ended'));
       } catch (err) {
-        if (!closed) retry(err);
+        if (closed) return;
+        if (err instanceof ApiError && err.status === 401) {
+          closed = true;
+          onState?.('closed', err);
+        } else {
+          retry(err);
+        }
       }
     };
     connect();

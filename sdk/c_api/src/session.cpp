@@ -79,7 +79,7 @@ std::shared_ptr<Executor> executor_of(const ss_task_system& tasks) {
 extern "C" {
 
 void ss_remote_options_default(ss_remote_options* out) {
-  if (out) *out = ss_remote_options{0, 0, 0, 0};
+  if (out) *out = ss_remote_options{0, 0, 0, 0, nullptr};
 }
 
 ss_status ss_session_create_remote(const char* url, const ss_remote_options* options, ss_session** out_session) {
@@ -103,6 +103,7 @@ ss_status ss_session_create_remote_on(const char* url, const ss_remote_options* 
     if (o.connect_timeout_ms > 0) ro.connect_timeout = std::chrono::milliseconds(o.connect_timeout_ms);
     if (o.request_timeout_ms > 0) ro.request_timeout = std::chrono::milliseconds(o.request_timeout_ms);
     if (o.async_threads > 0) ro.async_threads = o.async_threads;
+    if (o.auth_token) ro.auth_token = o.auth_token;
     if (tasks) ro.executor = executor_of(*tasks);
     std::shared_ptr<Session> session = RemoteSession::connect(url, ro).value();
     *out_session = wrap_session(std::move(session));

@@ -11,7 +11,7 @@
 
 // The layouts that C, C# (P/Invoke, sequential layout; bindings/csharp/Softshell.cs) and Unreal
 // rely on. Changing one is an ABI break: bump SS_ABI_VERSION (and the C# file).
-static_assert(SS_ABI_VERSION == 2u);
+static_assert(SS_ABI_VERSION == 3u);
 static_assert(sizeof(ss_vec3) == 24 && sizeof(ss_quat) == 32 && sizeof(ss_pose) == 56);
 static_assert(sizeof(ss_surface_point) == 24 && offsetof(ss_surface_point, u) == 8);
 static_assert(sizeof(ss_material) == 32 && sizeof(ss_geom_id) == 16);
@@ -20,7 +20,7 @@ static_assert(sizeof(ss_limit_sample) == 96);
 static_assert(sizeof(ss_pick) == 184 && offsetof(ss_pick, estimate) == 8 && offsetof(ss_pick, t) == 152 &&
               offsetof(ss_pick, iterations) == 176);
 static_assert(sizeof(ss_grab_options) == 8 && sizeof(ss_floor_options) == 16);
-static_assert(sizeof(ss_remote_options) == 16);
+static_assert(sizeof(ss_remote_options) == 16 + sizeof(void*) && offsetof(ss_remote_options, auth_token) == 16);
 static_assert(sizeof(ss_geometry_status) == 24 && offsetof(ss_geometry_status, progress) == 16);
 // SS_LOG_* are softshell::LogLevel's values.
 static_assert(static_cast<int>(softshell::LogLevel::kDebug) == SS_LOG_DEBUG &&

@@ -17,7 +17,7 @@ using Clock = std::chrono::steady_clock;
 
 // Statuses after which trying again cannot help: the request itself is wrong or the geometry is
 // unknown (after a server restart without it, say).
-bool terminal(int status) { return status == 400 || status == 404 || status == 405 || status == 406; }
+bool terminal(int status) { return status == 400 || status == 401 || status == 404 || status == 405 || status == 406; }
 
 class StreamSource final : public EventSubscription::Source {
  public:
@@ -121,7 +121,7 @@ class StreamSource final : public EventSubscription::Source {
                                                                : remote::transport_error(res.error(), url_, options_)});
       return true;
     }
-    const Error why = status != 0 ? wire::decode_error_json(error_body, status)
+    const Error why = status != 0 ? remote::server_error(error_body, status, options_)
                                   : Error{ErrorCode::kUnavailable, remote::transport_error(res.error(), url_, options_)};
     report_first(why);
     if (terminal(status)) feed_->fail(why);

@@ -79,7 +79,7 @@ Result<HeldResult> RemoteSession::release_hold(const GeomId& id, const std::stri
 Result<HoldList> RemoteSession::holds(const GeomId& id) {
   auto reply = impl_->get(geometry_path(id) + "/holds", wire::kJsonMediaType);
   if (!reply) return reply.error();
-  if (reply->status != 200) return Impl::server_error(*reply);
+  if (reply->status != 200) return impl_->server_error(*reply);
   return wire::decode_hold_list_json(reply->body);
 }
 
@@ -87,7 +87,7 @@ Result<HoldDetail> RemoteSession::hold(const GeomId& id, const std::string& hold
   if (auto ok = wire::check_hold_id(hold_id); !ok) return ok.error();
   auto reply = impl_->get(hold_path(id, hold_id), wire::kJsonMediaType);
   if (!reply) return reply.error();
-  if (reply->status != 200) return Impl::server_error(*reply);
+  if (reply->status != 200) return impl_->server_error(*reply);
   return wire::decode_hold_json(reply->body);
 }
 

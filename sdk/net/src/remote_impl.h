@@ -47,6 +47,17 @@ inline std::string transport_error(httplib::Error e, const std::string& url, con
   }
 }
 
+// The error of a server's error answer. A 401 (the server's --auth-token-file) is
+// kInvalidArgument, as other refused requests, and also says where the SDK takes the token.
+inline Error server_error(std::string_view body, int status, const RemoteSessionOptions& options) {
+  Error e = wire::decode_error_json(body, status);
+  if (status == 401) {
+    e.message += options.auth_token.empty() ? " (RemoteSessionOptions::auth_token is empty)"
+                                            : " (RemoteSessionOptions::auth_token was sent and refused)";
+  }
+  return e;
+}
+
 // A client of the server at `url` with the session's timeouts; kInvalidArgument for a bad URL.
 Result<std::unique_ptr<httplib::Client>> make_client(const std::string& url, const RemoteSessionOptions& options);
 
@@ -162,7 +173,7 @@ struct RemoteSession::Impl {
 
   std::string transport_error(httplib::Error e) const { return remote::transport_error(e, url, options); }
 
-  static Error server_error(const Reply& r) { return wire::decode_error_json(r.body, r.status); }
+  Error server_error(const Reply& r) const { return remote::server_error(r.body, r.status, options); }
 
   std::string_view preferred_accept() const { return wire::media_type(options.format); }
 

@@ -16,6 +16,7 @@ Result<std::unique_ptr<httplib::Client>> remote::make_client(const std::string& 
   c->set_connection_timeout(options.connect_timeout);
   c->set_write_timeout(options.request_timeout);
   c->set_decompress(options.compress);
+  if (!options.auth_token.empty()) c->set_bearer_token_auth(options.auth_token);
   return c;
 }
 
@@ -53,7 +54,7 @@ const RemoteSessionOptions& RemoteSession::options() const { return impl_->optio
 Result<void> RemoteSession::health() {
   auto reply = impl_->get("/health", wire::kJsonMediaType);
   if (!reply) return reply.error();
-  if (reply->status != 200) return Impl::server_error(*reply);
+  if (reply->status != 200) return impl_->server_error(*reply);
   return {};
 }
 
@@ -76,7 +77,7 @@ Result<UploadResult> RemoteSession::upload(const ControlMesh& mesh, const Materi
   // The JSON answer also carries the status, which the 16-byte binary answer lacks.
   auto reply = impl_->post(path, body, binary ? wire::Format::kBinary : wire::Format::kJson, wire::kJsonMediaType);
   if (!reply) return reply.error();
-  if (reply->status != 200 && reply->status != 201) return Impl::server_error(*reply);
+  if (reply->status != 200 && reply->status != 201) return impl_->server_error(*reply);
   const bool created = reply->status == 201;
   return is_binary(reply->content_type) ? wire::decode_upload_response_binary(reply->body, created)
                                         : wire::decode_upload_response_json(reply->body, created);
@@ -85,14 +86,14 @@ Result<UploadResult> RemoteSession::upload(const ControlMesh& mesh, const Materi
 Result<std::vector<GeometryInfo>> RemoteSession::geometries() {
   auto reply = impl_->get("/geometries", wire::kJsonMediaType);
   if (!reply) return reply.error();
-  if (reply->status != 200) return Impl::server_error(*reply);
+  if (reply->status != 200) return impl_->server_error(*reply);
   return wire::decode_geometry_list_json(reply->body);
 }
 
 Result<GeometryInfo> RemoteSession::geometry_info(const GeomId& id) {
   auto reply = impl_->get(geometry_path(id) + "/status", wire::kJsonMediaType);
   if (!reply) return reply.error();
-  if (reply->status != 200) return Impl::server_error(*reply);
+  if (reply->status != 200) return impl_->server_error(*reply);
   return wire::decode_geometry_info_json(reply->body);
 }
 
@@ -100,7 +101,7 @@ Result<Geometry> RemoteSession::geometry(const GeomId& id) {
   // JSON: full precision, any faces, tags and the namespace.
   auto reply = impl_->get(geometry_path(id), wire::kJsonMediaType);
   if (!reply) return reply.error();
-  if (reply->status != 200) return Impl::server_error(*reply);
+  if (reply->status != 200) return impl_->server_error(*reply);
   return is_binary(reply->content_type) ? wire::decode_geometry_binary(reply->body)
                                         : wire::decode_geometry_json(reply->body);
 }
@@ -127,7 +128,7 @@ std::future<Result<DeformationResult>> RemoteSession::deform_async(const GeomId&
 Result<std::vector<uint32_t>> RemoteSession::result_ids(const GeomId& id) {
   auto reply = impl_->get(geometry_path(id) + "/results", wire::kJsonMediaType);
   if (!reply) return reply.error();
-  if (reply->status != 200) return Impl::server_error(*reply);
+  if (reply->status != 200) return impl_->server_error(*reply);
   return wire::decode_result_ids_json(reply->body);
 }
 
@@ -141,7 +142,7 @@ Result<DeformationRequest> RemoteSession::result_request(const GeomId& id, uint3
   auto reply =
       impl_->get(geometry_path(id) + "/results/" + std::to_string(res_id) + "/request", wire::kJsonMediaType);
   if (!reply) return reply.error();
-  if (reply->status != 200) return Impl::server_error(*reply);
+  if (reply->status != 200) return impl_->server_error(*reply);
   return wire::decode_request_json(reply->body);
 }
 
@@ -163,7 +164,7 @@ Result<LimitComb> RemoteSession::limit_comb(const GeomId& id, const SurfacePoint
                            "&face-index=" + std::to_string(point.face) + "&subface=" + std::to_string(point.subface);
   auto reply = impl_->get(path, impl_->preferred_accept());
   if (!reply) return reply.error();
-  if (reply->status != 200) return Impl::server_error(*reply);
+  if (reply->status != 200) return impl_->server_error(*reply);
   return is_binary(reply->content_type) ? wire::decode_limit_comb_binary(reply->body, point)
                                         : wire::decode_limit_comb_json(reply->body);
 }
@@ -176,7 +177,7 @@ Result<StressField> RemoteSession::stresses(const GeomId& id, uint32_t res_id, c
                                : impl_->post(path, wire::encode_stress_query_json(query), wire::Format::kJson,
                                              wire::kJsonMediaType);
   if (!reply) return reply.error();
-  if (reply->status != 200) return Impl::server_error(*reply);
+  if (reply->status != 200) return impl_->server_error(*reply);
   return wire::decode_stress_field_json(reply->body);
 }
 

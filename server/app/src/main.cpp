@@ -12,6 +12,7 @@
 #include <vector>
 
 #include <pthread.h>
+#include <semaphore.h>
 #include <sys/resource.h>
 
 // GCC 12 reports a potential null dereference inside CLI11's own string splitting
@@ -19,11 +20,20 @@
 #pragma GCC diagnostic ignored "-Wnull-dereference"
 #include <CLI/CLI.hpp>
 
+#include "softshell/http/auth.h"
 #include "softshell/http/server.h"
 #include "softshell/service/log.h"
 #include "softshell/service/service.h"
 
 namespace {
+
+// The stop signal (SIGINT or SIGTERM), set by its handler, which posts g_stop (async-signal-safe).
+volatile std::sig_atomic_t g_signal = 0;
+sem_t g_stop;
+void on_stop_signal(int number) {
+  g_signal = number;
+  sem_post(&g_stop);
+}
 
 constexpr const char* kDescription =
     "Serves the softshell HTTP API (PROTOCOL.md): clients upload Catmull-Clark control meshes, the\n"
@@ -54,6 +64,7 @@ struct Options {
   std::vector<std::string> cors_origins;
   std::string log_level = "info";
   double shutdown_timeout = 5.0;
+  std::string auth_token_file;
 };
 
 // Ranges are checked by CLI11; the help shows them in the text, so the validators stay unnamed.
@@ -115,6 +126,12 @@ void add_options(CLI::App& app, Options& o) {
                  "line per request: method, path, status, microseconds")
       ->envname("SOFTSHELL_LOG_LEVEL")->type_name("LEVEL")
       ->check(CLI::IsMember({"debug", "info", "warning", "error", "off"}, CLI::ignore_case).description(""));
+  app.add_option("--auth-token-file", o.auth_token_file,
+                 "file holding an access token (16+ visible ASCII characters,\n"
+                 "e.g. from `openssl rand -hex 32`): every request but GET /health\n"
+                 "and the browser app's files then needs 'Authorization: Bearer\n"
+                 "<token>' (401 otherwise); off by default")
+      ->envname("SOFTSHELL_AUTH_TOKEN_FILE")->type_name("FILE");
 }
 
 // Parses the command line; returns the exit status when the program should stop now (help,
@@ -158,12 +175,23 @@ int main(int argc, char** argv) {
       o.max_connections_per_address >= 0 ? o.max_connections_per_address : std::max(1, http_options.max_connections / 4);
   if (o.max_holds > 0) service_options.max_holds_per_geometry = o.max_holds;
   http_options.cors_origins = o.cors_origins;
+  std::vector<std::string> token_warnings;
+  if (!o.auth_token_file.empty()) {
+    auto token = http::read_auth_token_file(o.auth_token_file);
+    if (!token) {
+      std::cerr << "softshell-server: --auth-token-file: " << token.error().message << "\n";
+      return 2;
+    }
+    http_options.auth_token = std::move(token->token);
+    token_warnings = std::move(token->warnings);
+  }
   const service::LogLevel level = service::parse_log_level(o.log_level).value();  // checked above
 
   const service::Logger logger{level, service::stderr_log_sink()};
   set_log_sink(logger.sink, level);  // the SDK's own reports (internal errors, failed assertions)
   service_options.logger = logger;
   http_options.logger = logger;
+  for (const std::string& w : token_warnings) logger.warning(w);
   http_options.reserved_connections = std::min(http_options.reserved_connections, http_options.max_connections / 2);
 
   // Every open connection and event stream is a descriptor: the soft limit (often 1024) is
@@ -174,8 +202,18 @@ int main(int argc, char** argv) {
     ::setrlimit(RLIMIT_NOFILE, &files);
   }
 
-  // SIGINT and SIGTERM are taken by sigwait below; every thread created from here on inherits
-  // the blocked mask, so no worker is interrupted by them.
+  // SIGINT and SIGTERM: every thread created from here on inherits the blocked mask, so no worker
+  // is interrupted by them. Threads a library started before main (OpenBLAS's pool) do not block
+  // them and may be the ones they are delivered to, so sigwait alone is not enough (the default
+  // action would kill the process there): a handler that only records the signal takes them on
+  // whichever thread, and the main thread unblocks them once the server runs.
+  struct sigaction stop_action {};
+  stop_action.sa_handler = on_stop_signal;
+  stop_action.sa_flags = SA_RESTART;
+  sigemptyset(&stop_action.sa_mask);
+  sem_init(&g_stop, 0, 0);
+  sigaction(SIGINT, &stop_action, nullptr);
+  sigaction(SIGTERM, &stop_action, nullptr);
   sigset_t signals;
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
@@ -195,10 +233,11 @@ int main(int argc, char** argv) {
               *bound);
   std::fflush(stdout);
 
-  int received = 0;
-  sigwait(&signals, &received);
+  pthread_sigmask(SIG_UNBLOCK, &signals, nullptr);  // (the handler runs here or on a library's thread)
+  while (sem_wait(&g_stop) != 0) {
+  }
   const auto name = [](int sig) { return std::string(sig == SIGINT ? "SIGINT" : "SIGTERM"); };
-  logger.info("received " + name(received) + ", stopping (at most " + std::to_string(o.shutdown_timeout) +
+  logger.info("received " + name(g_signal) + ", stopping (at most " + std::to_string(o.shutdown_timeout) +
               " s; a second signal stops at once)");
   // The service stops first: what waits for it is answered and long work is cancelled, so the
   // connections it held can finish. Then the HTTP server ends its connections and streams.
@@ -210,14 +249,14 @@ int main(int argc, char** argv) {
   });
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.shutdown_timeout);
   while (!stopped.load()) {
-    const timespec tick{0, 20'000'000};
-    const int again = sigtimedwait(&signals, nullptr, &tick);
+    const bool again = sem_trywait(&g_stop) == 0;
     const bool late = std::chrono::steady_clock::now() >= deadline;
-    if (again > 0 || late) {
-      logger.error(std::string(again > 0 ? "received " + name(again) + " again" : "the shutdown timeout passed") +
+    if (again || late) {
+      logger.error(std::string(again ? "received " + name(g_signal) + " again" : "the shutdown timeout passed") +
                    ": exiting with " + std::to_string(server.busy_connections()) + " connection(s) still busy");
       std::_Exit(1);  // what still runs is abandoned; every answer already sent stands
     }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   stopper.join();
   logger.info("stopped");

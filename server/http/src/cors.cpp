@@ -9,8 +9,8 @@ namespace softshell::http::internal {
 namespace {
 
 constexpr const char* kMethods = "GET, POST, PUT, DELETE, OPTIONS";
-constexpr const char* kHeaders = "Content-Type, Accept, Last-Event-ID";
-constexpr const char* kExposed = "ETag, Retry-After, Allow";
+constexpr const char* kHeaders = "Content-Type, Accept, Last-Event-ID, Authorization";
+constexpr const char* kExposed = "ETag, Retry-After, Allow, WWW-Authenticate";
 
 bool allowed(const std::vector<std::string>& origins, const std::string& origin) {
   if (origin.empty()) return false;

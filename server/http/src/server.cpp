@@ -12,9 +12,11 @@
 #include <optional>
 #include <thread>
 
+#include "auth.h"
 #include "connection_threads.h"
 #include "context.h"
 #include "extensions.h"
+#include "softshell/http/auth.h"
 #include "softshell/service/metrics.h"
 
 namespace softshell::http {
@@ -147,6 +149,11 @@ struct HttpServer::Impl {
     server.set_expect_100_continue_handler([this](const httplib::Request& req, httplib::Response& res) {
       t_request = RequestContext{Clock::now(), Endpoint::kUnmatched, true};
       if (internal::Connection* c = internal::current_connection()) c->head_complete();
+      if (!internal::authorize(ctx.options.auth_token, req, res)) {
+        res.set_header("Server", internal::kServerHeader);
+        res.set_header("Content-Length", std::to_string(res.body.size()));
+        return res.status;
+      }
       const auto refusal = refuse_body(req, ctx.options.max_body_bytes);
       if (!refusal) return 100;
       answer_refusal(*refusal, res);
@@ -159,6 +166,8 @@ struct HttpServer::Impl {
           t_request = RequestContext{Clock::now(), Endpoint::kUnmatched, true};
           if (internal::Connection* c = internal::current_connection()) c->head_complete();
           res.set_header("Server", internal::kServerHeader);  // kept by every handler and error page
+          // The token first: a client without it learns no limit of this server.
+          if (!internal::authorize(ctx.options.auth_token, req, res)) return httplib::Server::HandlerResponse::Handled;
           if (const auto refusal = refuse_body(req, ctx.options.max_body_bytes)) {
             answer_refusal(*refusal, res);
             return httplib::Server::HandlerResponse::Handled;
@@ -330,6 +339,9 @@ Result<int> HttpServer::start(const std::string& host, int port) {
   std::lock_guard lock(impl_->lifecycle_mu);
   if (impl_->started.load()) return Error{ErrorCode::kUnavailable, "the HTTP server was started already"};
   if (port < 0 || port > 65535) return Error{ErrorCode::kInvalidArgument, "port must be 0..65535"};
+  if (const std::string& token = impl_->ctx.options.auth_token; !token.empty()) {
+    if (auto ok = check_auth_token(token); !ok) return Error{ErrorCode::kInvalidArgument, "auth_token: " + ok.error().message};
+  }
   int bound = -1;
   if (port == 0) {
     bound = impl_->server.bind_to_any_port(host);

@@ -74,8 +74,9 @@ SS_API uint32_t ss_version_number(void);
 
 /** The ABI version this header describes; compare with `ss_abi_version()` at load time and refuse
  *  a library with another one (struct layouts or signatures differ). 2: generation-checked
- *  handles, blittable ss_embedded_options, geometry status, presets, limit_comb, log callback. */
-#define SS_ABI_VERSION 2u
+ *  handles, blittable ss_embedded_options, geometry status, presets, limit_comb, log callback.
+ *  3: ss_remote_options.auth_token. */
+#define SS_ABI_VERSION 3u
 /** The ABI version of the loaded library. */
 SS_API uint32_t ss_abi_version(void);
 
@@ -432,6 +433,11 @@ typedef struct ss_remote_options {
   int32_t binary;              /* != 0: the paper's binary layouts where a body fits them (results in
                                   f32); 0 (default): JSON, double precision */
   int32_t async_threads;       /* threads running asynchronous deformations; 0: 2 */
+  const char* auth_token;      /* access token of a server started with --auth-token-file, sent as
+                                  `Authorization: Bearer <token>` on every request (copied in by
+                                  ss_session_create_remote*); NULL or "": none. A server that wants
+                                  one refuses requests without it (HTTP 401) with
+                                  SS_INVALID_ARGUMENT, the message naming auth_token */
 } ss_remote_options;
 SS_API void ss_remote_options_default(ss_remote_options* out);
 /** A session with the server at `url` (`http://host:port` or `host:port`) that answered

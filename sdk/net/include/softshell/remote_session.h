@@ -44,6 +44,11 @@ struct RemoteSessionOptions {
   /// A stream that carries nothing (not even the server's keep-alive comment, sent at least
   /// every 15 s) for this long is taken as dropped and reconnected.
   std::chrono::milliseconds events_idle_timeout{45000};
+  /// Access token of a server started with `--auth-token-file`, sent as `Authorization: Bearer
+  /// <token>` on every request and event stream. Empty: none. A server that needs one refuses
+  /// every call but `health` (and so `connect`) without it, or with a wrong one (HTTP 401):
+  /// kInvalidArgument with the server's message and a note naming this option.
+  std::string auth_token;
 };
 
 /// A connection to a softshell server over HTTP/1.1 (cpp-httplib's client), with keep-alive

@@ -77,6 +77,10 @@ struct ServerOptions {
   /// preflight requests are answered and responses carry Access-Control-Allow-Origin. Empty
   /// (the default): no CORS headers, browsers allow only same-origin pages (the app at /).
   std::vector<std::string> cors_origins;
+  /// Access token every request needs as `Authorization: Bearer <token>`, but `GET /health`, the
+  /// browser app's files and CORS preflights (softshell/http/auth.h); others get 401. Empty (the
+  /// default): no authentication. `start` refuses a token `check_auth_token` refuses.
+  std::string auth_token;
   /// Where request lines (`info`: method, path, status, microseconds) and handler failures
   /// (`error`) go.
   service::Logger logger;
