@@ -47,6 +47,7 @@ struct Options {
   size_t max_holds = 0;
   std::vector<std::string> cors_origins;
   std::string log_level = "info";
+  std::string data_dir;
 };
 
 // Ranges are checked by CLI11; the help shows them in the text, so the validators stay unnamed.
@@ -98,6 +99,11 @@ void add_options(CLI::App& app, Options& o) {
                  "line per request: method, path, status, microseconds")
       ->envname("SOFTSHELL_LOG_LEVEL")->type_name("LEVEL")
       ->check(CLI::IsMember({"debug", "info", "warning", "error", "off"}, CLI::ignore_case).description(""));
+  app.add_option("--data-dir", o.data_dir,
+                 "keep geometries and results in DIR (created if missing; one\n"
+                 "server per DIR) and restore them on start; every result is on\n"
+                 "disk before it is answered; default: in memory only")
+      ->envname("SOFTSHELL_DATA_DIR")->type_name("DIR");
 }
 
 // Parses the command line; returns the exit status when the program should stop now (help,
@@ -164,7 +170,13 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   std::signal(SIGPIPE, SIG_IGN);
 
-  auto svc = std::make_shared<service::Service>(service_options);
+  service_options.data_dir = o.data_dir;
+  auto created = service::Service::create(service_options);
+  if (!created) {
+    std::cerr << "softshell-server: " << created.error().message << "\n";
+    return 1;
+  }
+  auto svc = std::move(*created);
   http::HttpServer server(svc, http_options);
   auto bound = server.start(o.host, o.port);
   if (!bound) {
