@@ -325,6 +325,27 @@ TEST(PersistentStoreTest, RefusesADamagedFileWherever) {
   EXPECT_GT(refused, places / 10) << refused << " of " << places;  // the records are damaged often enough
 }
 
+// What a write costs (printed, not asserted: the machine is shared): results the size of
+// spot_quadrangulated's (2,930 control points, about 70 KB each).
+TEST(PersistentStoreTest, WriteCostPerResult) {
+  TempDir dir;
+  Geometry g{test::make_grid(53, 54), exact_material(), ""};  // 2,970 control points
+  const GeomId id = id_of(g);
+  auto store = open_ok(dir.path);
+  ASSERT_TRUE(store->save_geometry(id, g));
+  constexpr uint32_t kResults = 200;
+  std::vector<StoredResult> results;
+  for (uint32_t k = 1; k <= kResults; ++k) results.push_back(full_result(k, g.mesh.num_vertices()));
+  const auto start = std::chrono::steady_clock::now();
+  for (const StoredResult& r : results) ASSERT_TRUE(store->save_result(id, r));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::cout << "[ write ] " << g.mesh.num_vertices() << " control points: " << 1e6 * seconds / kResults
+            << " us per result, " << store->disk_bytes() / kResults << " bytes on disk per result\n";
+  auto loaded = store->load().value();
+  ASSERT_EQ(loaded.at(0).results.size(), kResults);
+  expect_same(results.back(), *loaded[0].results.back());
+}
+
 // --- the service on a data directory ------------------------------------------------------------
 
 ServiceOptions on(const TempDir& dir) {
