@@ -5,7 +5,9 @@
 
 #include <gtest/gtest.h>
 #include <sqlite3.h>
+#include <signal.h>
 #include <stdlib.h>
+#include <sys/resource.h>
 
 #include <filesystem>
 #include <fstream>
@@ -416,6 +418,36 @@ TEST(PersistentServiceTest, RefusesToStartWhenTheStoreDoesNotFitTheBudget) {
   // Nothing was lost by the refusal.
   Service s(on(dir));
   EXPECT_EQ(s.geometries().at(0).results, 20u);
+}
+
+// A write that fails (here: the file size limit, as a full disk would) answers 507 naming the
+// data directory, keeps nothing and uses up no id; once the disk has room again ids continue.
+TEST(PersistentServiceTest, AFailedWriteIsA507AndUsesUpNoId) {
+  TempDir dir;
+  Service s(on(dir));
+  const GeomId id = s.upload(exact_grid(), exact_material()).value().id;
+  ASSERT_TRUE(s.deform(id, pinned_push(1)).get());
+  ASSERT_TRUE(s.deform(id, pinned_push(2)).get());
+
+  rlimit saved{};
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &saved), 0);
+  const auto old_handler = signal(SIGXFSZ, SIG_IGN);  // write() fails with EFBIG instead
+  rlimit full = saved;
+  full.rlim_cur = static_cast<rlim_t>(fs::file_size(dir.db() + "-wal"));
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &full), 0);
+  auto refused = s.deform(id, pinned_push(3)).get();
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &saved), 0);
+  signal(SIGXFSZ, old_handler);
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().code, ErrorCode::kResourceExhausted);  // 507
+  EXPECT_NE(refused.error().message.find("the data directory " + dir.path + " could not be written"),
+            std::string::npos)
+      << refused.error().message;
+  EXPECT_EQ(s.result_ids(id).value().size(), 2u);
+
+  auto next = s.deform(id, pinned_push(4)).get();
+  ASSERT_TRUE(next) << next.error().message;
+  EXPECT_EQ((*next)->res_id, 3u);
 }
 
 TEST(PersistentServiceTest, WithoutADataDirectoryNothingIsWritten) {
