@@ -460,127 +460,90 @@ Result<void> PersistentStore::drop_results_through(const GeomId& id, uint32_t re
 
 Result<std::vector<RestoredGeometry>> PersistentStore::load() {
   std::lock_guard lock(mu_);
-  std::vector<RestoredGeometry> out;
-  auto damaged = [&](const std::string& what) {
+  auto damaged = [&](const std::string& what) -> Error {
     return Error{ErrorCode::kInvalidArgument, db_path_ + " is damaged: " + what +
                                                   "; move it away to start with an empty store, or restore it "
                                                   "from a backup"};
   };
-  sqlite3_stmt* st = nullptr;
-  auto finalize = [&] {
-    sqlite3_finalize(st);
-    st = nullptr;
+  using Statement = std::unique_ptr<sqlite3_stmt, int (*)(sqlite3_stmt*)>;
+  auto prepare = [&](const char* sql) {
+    sqlite3_stmt* st = nullptr;
+    sqlite3_prepare_v2(db_, sql, -1, &st, nullptr);
+    return Statement(st, &sqlite3_finalize);
   };
-  if (sqlite3_prepare_v2(db_, "SELECT seq, id, name_space, geometry, dropped_through FROM geometries ORDER BY seq",
-                         -1, &st, nullptr) != SQLITE_OK) {
-    return failure("read");
-  }
+
+  std::vector<RestoredGeometry> out;
   std::vector<int64_t> seqs;
+  Statement geometries = prepare("SELECT seq, id, name_space, geometry, dropped_through FROM geometries ORDER BY seq");
+  if (!geometries) return failure("read");
+  sqlite3_stmt* st = geometries.get();
   int rc = 0;
   while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
     RestoredGeometry g;
     const std::string_view id = column_bytes(st, 1);
-    if (id.size() != g.id.bytes.size()) {
-      finalize();
-      return damaged("a geometry id is " + std::to_string(id.size()) + " bytes long");
-    }
+    if (id.size() != g.id.bytes.size()) return damaged("a geometry id is " + std::to_string(id.size()) + " bytes long");
     std::memcpy(g.id.bytes.data(), id.data(), id.size());
     auto decoded = wire::decode_geometry_json(column_bytes(st, 3));
-    if (!decoded) {
-      finalize();
-      return damaged("geometry " + g.id.hex() + " does not decode (" + decoded.error().message + ")");
-    }
+    if (!decoded) return damaged("geometry " + g.id.hex() + " does not decode (" + decoded.error().message + ")");
     g.geometry = std::move(*decoded);
     g.geometry.name_space = std::string(column_bytes(st, 2));
     if (geometry_id(g.geometry.mesh, g.geometry.material, g.geometry.name_space) != g.id) {
-      finalize();
       return damaged("geometry " + g.id.hex() + " does not match its content id");
     }
     const int64_t dropped = sqlite3_column_int64(st, 4);
-    if (dropped < 0 || dropped > UINT32_MAX) {
-      finalize();
-      return damaged("geometry " + g.id.hex() + " has a bad result count");
-    }
+    if (dropped < 0 || dropped > UINT32_MAX) return damaged("geometry " + g.id.hex() + " has a bad result count");
     g.dropped_through = static_cast<uint32_t>(dropped);
     seqs.push_back(sqlite3_column_int64(st, 0));
     out.push_back(std::move(g));
   }
-  finalize();
   if (rc != SQLITE_DONE) return failure("read");
 
-  if (sqlite3_prepare_v2(db_,
-                         "SELECT res_id, stored_at_ns, positions, request, stats, holds, checksum FROM results "
-                         "WHERE geom_seq = ?1 ORDER BY res_id",
-                         -1, &st, nullptr) != SQLITE_OK) {
-    return failure("read");
-  }
+  Statement results = prepare(
+      "SELECT res_id, stored_at_ns, positions, request, stats, holds, checksum FROM results "
+      "WHERE geom_seq = ?1 ORDER BY res_id");
+  if (!results) return failure("read");
+  st = results.get();
   for (size_t k = 0; k < out.size(); ++k) {
     RestoredGeometry& g = out[k];
     const auto vertices = static_cast<size_t>(g.geometry.mesh.num_vertices());
     sqlite3_reset(st);
     sqlite3_bind_int64(st, 1, seqs[k]);
     while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
-      auto r = std::make_shared<StoredResult>();
       const int64_t res_id = sqlite3_column_int64(st, 0);
       const std::string what = "result " + std::to_string(res_id) + " of geometry " + g.id.hex();
-      if (res_id <= 0 || res_id > UINT32_MAX) {
-        finalize();
-        return damaged("a result id of geometry " + g.id.hex() + " is out of range");
+      if (res_id <= 0 || res_id > UINT32_MAX) return damaged("a result id of geometry " + g.id.hex() + " is out of range");
+      const std::string_view positions = column_bytes(st, 2), holds = column_bytes(st, 5);
+      const bool has_holds = sqlite3_column_type(st, 5) != SQLITE_NULL;
+      if (record_checksum(res_id, sqlite3_column_int64(st, 1), positions, column_bytes(st, 3), column_bytes(st, 4),
+                          has_holds ? &holds : nullptr) != sqlite3_column_int64(st, 6)) {
+        return damaged(what + " does not match its checksum");
       }
-      {
-        const std::string_view holds = column_bytes(st, 5);
-        const bool has_holds = sqlite3_column_type(st, 5) != SQLITE_NULL;
-        if (record_checksum(res_id, sqlite3_column_int64(st, 1), column_bytes(st, 2), column_bytes(st, 3),
-                            column_bytes(st, 4), has_holds ? &holds : nullptr) != sqlite3_column_int64(st, 6)) {
-          finalize();
-          return damaged(what + " does not match its checksum");
-        }
-      }
+      auto r = std::make_shared<StoredResult>();
       r->res_id = static_cast<uint32_t>(res_id);
-      r->stored_at = std::chrono::system_clock::time_point(
-          std::chrono::duration_cast<std::chrono::system_clock::duration>(
-              std::chrono::nanoseconds(sqlite3_column_int64(st, 1))));
-      const std::string_view positions = column_bytes(st, 2);
+      r->stored_at = std::chrono::system_clock::time_point(std::chrono::duration_cast<std::chrono::system_clock::duration>(
+          std::chrono::nanoseconds(sqlite3_column_int64(st, 1))));
       if (positions.size() != vertices * sizeof(Vec3)) {
-        finalize();
         return damaged(what + " has " + std::to_string(positions.size()) + " bytes of positions, not " +
                        std::to_string(vertices * sizeof(Vec3)));
       }
       r->positions.resize(vertices);
       if (vertices) std::memcpy(static_cast<void*>(r->positions.data()), positions.data(), positions.size());
       for (const Vec3& p : r->positions) {
-        if (!p.allFinite()) {
-          finalize();
-          return damaged(what + " has a non-finite position");
-        }
+        if (!p.allFinite()) return damaged(what + " has a non-finite position");
       }
       auto request = wire::decode_request_json(column_bytes(st, 3));
-      if (!request) {
-        finalize();
-        return damaged(what + ": its request does not decode (" + request.error().message + ")");
-      }
+      if (!request) return damaged(what + ": its request does not decode (" + request.error().message + ")");
       r->request = std::move(*request);
-      if (!decode_stats(column_bytes(st, 4), *r)) {
-        finalize();
-        return damaged(what + ": its solve statistics do not decode");
-      }
-      if (sqlite3_column_type(st, 5) != SQLITE_NULL) {
-        HoldVersions holds;
-        if (!decode_holds(column_bytes(st, 5), holds)) {
-          finalize();
-          return damaged(what + ": its hold versions do not decode");
-        }
-        r->holds = std::move(holds);
+      if (!decode_stats(column_bytes(st, 4), *r)) return damaged(what + ": its solve statistics do not decode");
+      if (has_holds) {
+        HoldVersions versions;
+        if (!decode_holds(holds, versions)) return damaged(what + ": its hold versions do not decode");
+        r->holds = std::move(versions);
       }
       g.results.push_back(std::move(r));
     }
-    if (rc != SQLITE_DONE) {
-      Error err = failure("read");
-      finalize();
-      return err;
-    }
+    if (rc != SQLITE_DONE) return failure("read");
   }
-  finalize();
   return out;
 }
 
