@@ -21,6 +21,7 @@ PACKAGES=(
   libeigen3-dev libosd-dev libsuitesparse-dev libbullet-dev
   libcpp-httplib-dev nlohmann-json3-dev libssl-dev libstb-dev
   libgtest-dev libgmock-dev libopenblas0-pthread libcli11-dev curl
+  libsqlite3-dev
 )
 
 # Optional: only tests/http/nginx_proxy_test.cpp needs nginx (it is skipped without it), so a

@@ -25,6 +25,13 @@ if(NOT TARGET OpenSSL::Crypto)
   find_package(OpenSSL 1.1.1 REQUIRED COMPONENTS Crypto)
 endif()
 
+# SQLite 3 (libsqlite3-dev): the service's persistent store (ServiceOptions::data_dir), through
+# pkg-config since Debian ships no CMake package for it.
+if(NOT TARGET PkgConfig::SQLITE3)
+  find_package(PkgConfig REQUIRED)
+  pkg_check_modules(SQLITE3 REQUIRED IMPORTED_TARGET sqlite3>=3.31)
+endif()
+
 # CHOLMOD (SuiteSparse 5.x ships no CMake package on Debian 12); only for the CHOLMOD backend
 # (SOFTSHELL_SPARSE_CHOLESKY=cholmod, the default).
 if(NOT SOFTSHELL_SPARSE_CHOLESKY STREQUAL "eigen" AND NOT TARGET softshell_dep::cholmod)

@@ -65,6 +65,7 @@ struct Options {
   std::string log_level = "info";
   double shutdown_timeout = 5.0;
   std::string auth_token_file;
+  std::string data_dir;
 };
 
 // Ranges are checked by CLI11; the help shows them in the text, so the validators stay unnamed.
@@ -132,6 +133,11 @@ void add_options(CLI::App& app, Options& o) {
                  "and the browser app's files then needs 'Authorization: Bearer\n"
                  "<token>' (401 otherwise); off by default")
       ->envname("SOFTSHELL_AUTH_TOKEN_FILE")->type_name("FILE");
+  app.add_option("--data-dir", o.data_dir,
+                 "keep geometries and results in DIR (created if missing; one\n"
+                 "server per DIR) and restore them on start; every result is on\n"
+                 "disk before it is answered; default: in memory only")
+      ->envname("SOFTSHELL_DATA_DIR")->type_name("DIR");
 }
 
 // Parses the command line; returns the exit status when the program should stop now (help,
@@ -221,7 +227,13 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   std::signal(SIGPIPE, SIG_IGN);
 
-  auto svc = std::make_shared<service::Service>(service_options);
+  service_options.data_dir = o.data_dir;
+  auto created = service::Service::create(service_options);
+  if (!created) {
+    std::cerr << "softshell-server: " << created.error().message << "\n";
+    return 1;
+  }
+  auto svc = std::move(*created);
   http::HttpServer server(svc, http_options);
   auto bound = server.start(o.host, o.port);
   if (!bound) {

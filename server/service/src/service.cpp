@@ -54,6 +54,27 @@ Error no_room(const MemoryBudget& budget, size_t bytes, const std::string& what)
                                                   "with a larger --store-mb)"};
 }
 
+size_t mesh_bytes(const ControlMesh& mesh) {
+  return sizeof(Geometry) + mesh.positions().size() * sizeof(Vec3) +
+         (mesh.face_indices().size() + mesh.face_offsets().size()) * sizeof(int32_t) +
+         mesh.creases().size() * sizeof(Crease) + mesh.corners().size() * sizeof(Corner);
+}
+
+// A generous estimate of a precomputed model before it exists (replaced by
+// ShellModel::memory_bytes() once built): the stiffness matrix couples each control point with
+// about 49 others (9 values + indices per pair) and every (sub-)face caches the basis at its
+// quadrature points.
+size_t model_estimate(const ControlMesh& mesh) {
+  size_t subfaces = 0;
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) subfaces += mesh.face_size(f) == 4 ? 1 : static_cast<size_t>(mesh.face_size(f));
+  return mesh.positions().size() * 49 * 9 * 12 + subfaces * 16 * 1024;
+}
+
+size_t result_bytes(const StoredResult& r) {
+  return sizeof(StoredResult) + r.positions.size() * sizeof(Vec3) + request_bytes(r.request) +
+         (r.holds ? r.holds->size() * (sizeof(std::pair<std::string, uint64_t>) + 16) : 0);
+}
+
 GeometryInfo Entry::info_locked() const {
   GeometryInfo info;
   info.id = id;
@@ -80,22 +101,6 @@ size_t physical_memory() {
 }
 
 int hardware_threads() { return std::max(1, static_cast<int>(std::thread::hardware_concurrency())); }
-
-size_t mesh_bytes(const ControlMesh& mesh) {
-  return sizeof(Geometry) + mesh.positions().size() * sizeof(Vec3) +
-         (mesh.face_indices().size() + mesh.face_offsets().size()) * sizeof(int32_t) +
-         mesh.creases().size() * sizeof(Crease) + mesh.corners().size() * sizeof(Corner);
-}
-
-// A generous estimate of a precomputed model before it exists (replaced by
-// ShellModel::memory_bytes() once built): the stiffness matrix couples each control point with
-// about 49 others (9 values + indices per pair) and every (sub-)face caches the basis at its
-// quadrature points.
-size_t model_estimate(const ControlMesh& mesh) {
-  size_t subfaces = 0;
-  for (int32_t f = 0; f < mesh.num_faces(); ++f) subfaces += mesh.face_size(f) == 4 ? 1 : static_cast<size_t>(mesh.face_size(f));
-  return mesh.positions().size() * 49 * 9 * 12 + subfaces * 16 * 1024;
-}
 
 Result<void> check_namespace(std::string_view ns) {
   auto bad = [](const std::string& m) -> Result<void> { return Error{ErrorCode::kInvalidArgument, m}; };
@@ -256,8 +261,7 @@ void Service::Impl::finish_precompute(const std::shared_ptr<Entry>& e,
 
 Result<ResultPtr> Service::Impl::store(Entry& e, std::shared_ptr<StoredResult> stored,
                                        const std::function<void()>& locked) {
-  const size_t bytes = sizeof(StoredResult) + stored->positions.size() * sizeof(Vec3) + request_bytes(stored->request) +
-                       (stored->holds ? stored->holds->size() * (sizeof(std::pair<std::string, uint64_t>) + 16) : 0);
+  const size_t bytes = result_bytes(*stored);
   {
     // The id is assigned here, under the geometry's lock, at the moment the result is stored:
     // ids follow the storage order and none is skipped or reused.
@@ -268,6 +272,13 @@ Result<ResultPtr> Service::Impl::store(Entry& e, std::shared_ptr<StoredResult> s
     }
     stored->res_id = static_cast<uint32_t>(e.results.size() + 1);
     stored->stored_at = std::chrono::system_clock::now();
+    // On disk before anyone can see it; a failed write uses up no id.
+    if (persistent) {
+      if (auto saved = persistent->save_result(e.id, *stored); !saved) {
+        budget.release(bytes);
+        return saved.error();
+      }
+    }
     total_results.fetch_add(1);  // counters first, so that whoever sees the result also sees them
     e.results.push_back(stored);
     if (locked) locked();
@@ -351,7 +362,15 @@ void Service::Impl::submit_solve(const std::shared_ptr<Entry>& e, std::shared_pt
   }, e.get());  // round-robin over the geometries with queued solves
 }
 
-Service::Service(ServiceOptions options) : options_(std::move(options)), impl_(std::make_unique<Impl>(options_)) {}
+Service::Service(ServiceOptions options) : options_(std::move(options)), impl_(std::make_unique<Impl>(options_)) {
+  if (!options_.data_dir.empty()) {
+    if (auto restored = impl_->restore(); !restored) throw Exception(restored.error());
+  }
+}
+
+Result<std::shared_ptr<Service>> Service::create(ServiceOptions options) {
+  return capture([&] { return Result<std::shared_ptr<Service>>(std::make_shared<Service>(std::move(options))); });
+}
 
 Service::~Service() { shutdown(); }
 
@@ -412,6 +431,12 @@ Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& m
                    "the server's memory budget (" + megabytes(impl_->budget.budget()) + ", " +
                        megabytes(impl_->budget.used()) + " in use) cannot hold this geometry (about " +
                        megabytes(bytes) + " with its precomputation); geometries are never dropped to make room"};
+    }
+    if (impl_->persistent) {
+      if (auto saved = impl_->persistent->save_geometry(id, *entry->geometry); !saved) {
+        impl_->budget.release(bytes);
+        return saved.error();
+      }
     }
     impl_->by_id.emplace(id, entry);
     impl_->in_order.push_back(entry);

@@ -21,6 +21,7 @@
 #include "hold_state.h"
 #include "lease_timer.h"
 #include "memory_budget.h"
+#include "persistent_store.h"
 #include "softshell/service/service.h"
 #include "task_queue.h"
 
@@ -42,6 +43,11 @@ size_t request_bytes(const DeformationRequest& r);
 Error not_found(const GeomId& id);
 Error shutdown_error();
 Error no_room(const MemoryBudget& budget, size_t bytes, const std::string& what);
+// What the service counts against its budget for a control mesh, a model not yet built (an
+// estimate) and a stored result.
+size_t mesh_bytes(const ControlMesh& mesh);
+size_t model_estimate(const ControlMesh& mesh);
+size_t result_bytes(const StoredResult& result);
 
 using Pending = std::pair<DeformationRequest, Service::DeformCallback>;
 using HoldPromise = std::shared_ptr<std::promise<Result<HoldOutcome>>>;
@@ -178,9 +184,17 @@ struct Service::Impl {
   void schedule_lease_locked(const std::shared_ptr<Entry>& e, const std::string& hold_id, internal::LiveHold& h,
                              std::chrono::milliseconds ttl);
 
+  // --- persistence (persistence.cpp) ---
+  // Opens options.data_dir and restores what it holds (before any other call; starts the
+  // restored geometries' precomputations).
+  Result<void> restore();
+
   ServiceOptions options;
   std::shared_ptr<engine::FactorCache> cache;
   internal::MemoryBudget budget;
+  // The persistent store (ServiceOptions::data_dir), or null. Written before a geometry or a
+  // result becomes visible; outlives the pools (declared before them).
+  std::unique_ptr<internal::PersistentStore> persistent;
 
   mutable std::shared_mutex registry_mu;
   std::unordered_map<GeomId, std::shared_ptr<Entry>, internal::GeomIdHash> by_id;

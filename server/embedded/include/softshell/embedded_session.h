@@ -25,7 +25,9 @@ namespace softshell {
 /// Thread-safety: every member function may be called from several threads at once.
 class EmbeddedSession final : public Session {
  public:
-  /// A session with its own service.
+  /// A session with its own service. With `options.data_dir` its geometries and results are kept
+  /// there and a later session on the same directory restores them; throws `softshell::Exception`
+  /// if the directory cannot be used (held by another service, damaged; see `service::Service`).
   explicit EmbeddedSession(service::ServiceOptions options = {});
   /// A session on a shared service (several sessions, or a session and other code).
   explicit EmbeddedSession(std::shared_ptr<service::Service> service);

@@ -78,6 +78,11 @@ struct ServiceOptions {
   std::shared_ptr<Executor> executor;
   /// Where the service's messages go (precomputations started/finished/failed).
   Logger logger;
+  /// Directory of the persistent store (created if missing); empty = everything in memory only.
+  /// With a directory, every geometry and result is written to an SQLite database there before
+  /// it is answered, and a new service on the same directory restores them (see `Service`).
+  /// One service at a time holds a directory (a lock file).
+  std::string data_dir;
 };
 
 /// A stored result: the deformed control points and the request that produced them.
@@ -197,9 +202,24 @@ class Subscription {
 /// that contradicts other holds, or a release that leaves the rest unsolvable; 409).
 ///
 /// Thread-safety: every member function may be called concurrently from any number of threads.
+///
+/// Persistence (`ServiceOptions::data_dir`): uploads and results are written to the store before
+/// they are returned (a failed write is kResourceExhausted, HTTP 507, and nothing is kept, so no
+/// result id is used up). The constructor restores what the directory holds: geometries in
+/// upload order, each with its whole result history (later ids continue after the last stored
+/// one), and starts their precomputations at once in the background, as for uploads (requests
+/// wait for them). Holds are leases and are not kept: clients renew them with a PUT, and their
+/// versions continue. The stored meshes and results must fit `store_bytes`; models count
+/// against it as they are built.
 class Service {
  public:
+  /// Throws `softshell::Exception` if `options.data_dir` is given and cannot be used: held by
+  /// another service (kUnavailable), not a softshell store, damaged or of a newer schema
+  /// (kInvalidArgument), its contents larger than `store_bytes` (kResourceExhausted). See
+  /// `create` for the same as a `Result`.
   explicit Service(ServiceOptions options = {});
+  /// The constructor's errors as a `Result`.
+  static Result<std::shared_ptr<Service>> create(ServiceOptions options = {});
   /// Calls `shutdown()`.
   ~Service();
   Service(const Service&) = delete;
