@@ -221,7 +221,7 @@ void Service::Impl::finish_precompute(const std::shared_ptr<Entry>& e,
       e->model = std::move(*model);
       solver = std::make_shared<const engine::Solver>(e->model, cache);
       e->solver = solver;
-      e->nonlinear = std::make_shared<const engine::NonlinearSolver>(e->model, cache);
+      e->nonlinear = std::make_shared<const engine::NonlinearSolver>(e->model, cache, options.nonlinear);
       precompute_hist.observe(seconds);  // before the status is visible: stats never lag it
       e->status = GeometryStatus::kReady;
       const size_t actual = mesh_bytes(e->geometry->mesh) + e->model->memory_bytes();
