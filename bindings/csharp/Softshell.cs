@@ -225,6 +225,7 @@ namespace Softshell
         public const int ForceTransferSubdivide = 0, ForceTransferVirtualWork = 1;
         public const int BoundaryEdgeAndCorner = 0, BoundaryNone = 1;
         public const int FeedConnecting = 0, FeedLive = 1, FeedFailed = 2;
+        public const int ModelLinear = 0, ModelNonlinear = 1;
 
         // ---- helpers -----------------------------------------------------------------------
 
@@ -365,6 +366,9 @@ namespace Softshell
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_request_set_surface_load(IntPtr request, ref Vec3 loadPerArea);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] public static extern Status ss_request_set_pressure(IntPtr request, double pressure);
+        /// <summary>model: ModelLinear (the default) or ModelNonlinear (large displacements and rotations).</summary>
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] public static extern Status ss_request_set_model(IntPtr request, int model);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] public static extern Status ss_request_model(IntPtr request, out int model);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_request_add_floor(IntPtr request, IntPtr tessellation, ref Vec3 planePoint, ref Vec3 planeNormal,
                                                          ref FloorOptions options, out int points, out int fixesRigidMotion);
@@ -424,6 +428,8 @@ namespace Softshell
         public static extern Status ss_deformation_wait(IntPtr operation, int timeoutMs, out int ready);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_deformation_read(IntPtr operation, out uint resId, double[] outXyz, int capacity, out int count);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_deformation_read_model(IntPtr operation, out int model, out int iterations, out double residual);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] public static extern void ss_deformation_destroy(IntPtr operation);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_session_latest_result(IntPtr session, ref GeomId id, uint have, int waitMs, out int hasNew,
@@ -457,6 +463,8 @@ namespace Softshell
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_hold_put_read(IntPtr operation, out uint resId, out ulong version, double[] outXyz, int capacity,
                                                      out int count);
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_hold_put_read_model(IntPtr operation, out int model, out int iterations, out double residual);
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)] public static extern void ss_hold_put_destroy(IntPtr operation);
         /// <summary>Blocks for one request: call it off the frame loop, or when the grab ends.</summary>
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]

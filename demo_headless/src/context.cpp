@@ -12,6 +12,7 @@ void Context::say(const std::string& line) const {
 
 DeformationResult Context::deform(const DeformationRequest& extra, const std::string& phase) {
   DeformationRequest request = extra;
+  request.model = model;
   const DeformationRequest& s = stage.supports;
   request.vertex_constraints.insert(request.vertex_constraints.end(), s.vertex_constraints.begin(), s.vertex_constraints.end());
   request.lagrange_constraints.insert(request.lagrange_constraints.end(), s.lagrange_constraints.begin(),
@@ -81,6 +82,7 @@ double Context::calibrate(const DeformationRequest& given, const std::string& ph
   constexpr double kMeasurable = 1e-5;  // of the object's size: ~100 f32 steps
   DeformationRequest probe = given;
   double probe_scale = 1.0;
+  model = DeformationModel::kLinear;  // the probe's response is scaled linearly
   DeformationResult result = deform(probe, phase + " (probe)");
   ++report.probes;
   Response r = measure_shape(view->surface, view->rest_vertices, view->rest_normals);
@@ -103,6 +105,23 @@ double Context::calibrate(const DeformationRequest& given, const std::string& ph
                  phase.c_str(), r.displacement, r.rotation, r.strain.value_or(-1.0), r.nonlinearity().value_or(-1.0), scale);
   }
   return scale * options.load_scale;
+}
+
+void Context::choose_model(const std::string& phase) {
+  // The linear range is left once the loads are kWarnOverAim times the aims: from there on (or
+  // when asked) the phase is solved with the nonlinear model.
+  const bool large = options.load_scale > LinearRange::kWarnOverAim;
+  model = options.model.value_or(large ? DeformationModel::kNonlinear : DeformationModel::kLinear);
+  if (model != DeformationModel::kNonlinear) return;
+  range.mark_nonlinear(phase);
+  report.nonlinear_phases.push_back(phase);
+  if (!options.model) {
+    char line[224];
+    std::snprintf(line, sizeof line, "%s: loads %.3g times the linear range's aims leave it: solved with the nonlinear model "
+                  "(slower; --model linear keeps the linear one)",
+                  phase.c_str(), options.load_scale);
+    say(line);
+  }
 }
 
 void Context::check_stresses(const std::string& phase) {

@@ -58,13 +58,19 @@ struct Context {
   std::vector<Vec3> shown;             ///< control points of the newest result
   std::vector<Snapshot> snapshots;
   int per_phase = 0;                   ///< steps of each scripted phase
+  /// The model `deform` solves with (set per phase by `calibrate`; probes are linear).
+  DeformationModel model = DeformationModel::kLinear;
 
   void say(const std::string& line) const;
   /// Solves `extra` together with the supports, shows the result and records it under `phase`.
   DeformationResult deform(const DeformationRequest& extra, const std::string& phase);
   /// A probe for `phase`: solves it, measures it (stresses included, if the server has them) and
   /// returns the factor that brings it to the linear range's aims, times `options.load_scale`.
+  /// (Leaves `model` linear.)
   double calibrate(const DeformationRequest& probe, const std::string& phase);
+  /// Sets `model` for a scripted phase: `options.model`, or by default the nonlinear model when
+  /// `load_scale` takes the phase's loads out of the linear range; records a nonlinear phase.
+  void choose_model(const std::string& phase);
   /// Stresses of a phase's worst result join the range checks.
   void check_stresses(const std::string& phase);
   /// Stresses of a result, if the server has them (if not, says so once in the notes).

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "softshell/deformation.h"
 #include "softshell/hold.h"
 #include "softshell/material.h"
 #include "softshell/result.h"
@@ -29,6 +30,11 @@ struct DemoOptions {
   /// Multiplies the loads the script chose to stay inside the linear model's range (> 1 leaves it
   /// on purpose, and the report then warns).
   double load_scale = 1.0;
+  /// The model of the scripted phases (grab, push, twist, two hands): empty = each phase with the
+  /// linear model while its loads stay in the linear model's range, with the nonlinear model when
+  /// `load_scale` takes it out of the range (large pulls). The calibration probes are always
+  /// linear (they are scaled linearly); the Bullet and shared phases stay linear.
+  std::optional<DeformationModel> model;
   bool follower = true;                  ///< run the second client
   /// 2 adds the shared phase: two users' hands (each its own hold) and the Bullet bridge's holds
   /// on one object at once, followed by a third client through the event stream (1 or 2).
@@ -115,6 +121,8 @@ struct DemoReport {
     std::optional<double> max_strain;    ///< von Mises stress / E
     bool exceeds_yield = false;
   } final;
+  /// The scripted phases solved with the nonlinear model (in script order).
+  std::vector<std::string> nonlinear_phases;
   /// A result left the linear model's range: what, where and what to do (also on stderr).
   std::vector<std::string> warnings;
   /// Things worth knowing that are not wrong (stresses unavailable, geometry precomputed before).

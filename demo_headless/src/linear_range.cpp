@@ -20,7 +20,7 @@ std::string length(double metres) {
 
 constexpr const char* kRemedy =
     "use smaller loads (--load-scale), a thicker or stiffer material, or the nonlinear model "
-    "(--model nonlinear, once it exists)";
+    "(--model nonlinear)";
 
 }  // namespace
 
@@ -120,27 +120,35 @@ Response RangeMonitor::worst(const std::string& phase) const {
   return {};
 }
 
+void RangeMonitor::mark_nonlinear(const std::string& phase) {
+  if (std::find(nonlinear_.begin(), nonlinear_.end(), phase) == nonlinear_.end()) nonlinear_.push_back(phase);
+}
+
 std::vector<std::string> RangeMonitor::warnings(double size, const Material& material, double yield,
                                                 const std::string& material_name) const {
   using L = LinearRange;
   std::vector<std::string> out;
   for (const auto& [phase, r] : phases_) {
     const std::string who = phase + ": ";
-    if (r.displacement > L::kWarnDisplacementPerSize * size) {
+    const bool nonlinear = std::find(nonlinear_.begin(), nonlinear_.end(), phase) != nonlinear_.end();
+    // Large displacements and rotations are the nonlinear model's range; the material's limits
+    // (strain, yield) hold for both models.
+    if (!nonlinear && r.displacement > L::kWarnDisplacementPerSize * size) {
       out.push_back(who + "the largest displacement, " + length(r.displacement) + ", is " +
                     number(100.0 * r.displacement / size, "%.1f") + "% of the object's size (" + length(size) +
                     "); the linear model assumes small displacements: " + kRemedy);
     }
-    if (r.rotation > L::kWarnRotation) {
+    if (!nonlinear && r.rotation > L::kWarnRotation) {
       out.push_back(who + "the surface turns by up to " + number(r.rotation * 180.0 / 3.14159265358979, "%.0f") +
                     " degrees; the linear model assumes small rotations: " + kRemedy);
     }
-    if (auto eta = r.nonlinearity(); eta && *eta > L::kWarnNonlinearity) {
+    const auto eta = r.nonlinearity();
+    if (!nonlinear && eta && *eta > L::kWarnNonlinearity) {
       out.push_back(who + "the stretching that rotations of " + number(r.rotation) +
                     " rad cause (which the linear model leaves out) is " + number(*eta, "%.2g") +
                     " times the strain it computes; a thin shell bent this far (" + length(r.displacement) + ", " +
                     number(r.displacement / material.thickness, "%.2g") + " thicknesses) also stretches: " + kRemedy);
-    } else if (!r.strain && r.displacement > 2.0 * L::kWarnNonlinearity * material.thickness) {  // w / 2t
+    } else if (!nonlinear && !r.strain && r.displacement > 2.0 * L::kWarnNonlinearity * material.thickness) {  // w / 2t
       out.push_back(who + "the largest displacement, " + length(r.displacement) + ", is " +
                     number(r.displacement / material.thickness, "%.2g") +
                     " thicknesses; a thin shell bent further than its thickness also stretches, which the linear "
@@ -148,8 +156,9 @@ std::vector<std::string> RangeMonitor::warnings(double size, const Material& mat
     }
     if (r.strain && *r.strain > L::kWarnStrain) {
       out.push_back(who + "strains reach " + number(100.0 * *r.strain, "%.2g") +
-                    "%; the linear elastic model holds to about " + number(100.0 * L::kWarnStrain, "%.0f") + "%: " +
-                    kRemedy);
+                    "%; the linear elastic material holds to about " + number(100.0 * L::kWarnStrain, "%.0f") + "%: " +
+                    (nonlinear ? std::string("use smaller loads (--load-scale) or a thicker or stiffer material")
+                               : std::string(kRemedy)));
     }
     if (r.exceeds_yield) {
       out.push_back(who + "the von Mises stress, " + number(r.von_mises.value_or(0.0) / 1e6) +

@@ -46,6 +46,9 @@ struct LinearRange {
   static constexpr double kAimYieldFraction = 0.4;       ///< of the yield strength
   /// Without stresses, deflections are kept below this many thicknesses (nonlinearity ~ w / 2t).
   static constexpr double kAimDisplacementPerThickness = 0.4;
+  /// Each warning limit is this many times its aim: loads scaled past it (--load-scale) leave the
+  /// linear range.
+  static constexpr double kWarnOverAim = 2.5;
 };
 
 /// Displacement and rotation of the shape `shown` against the rest shape (same tessellation).
@@ -74,6 +77,9 @@ class RangeMonitor {
   void observe_stresses(const std::string& phase, const StressField& field, const Material& material);
   /// The result with the largest displacement seen in a phase (res_id 0 if none).
   Response worst(const std::string& phase) const;
+  /// The phase is solved with the nonlinear model: large displacements and rotations are in its
+  /// range (only the material's limits, strain and yield, are checked).
+  void mark_nonlinear(const std::string& phase);
   /// One warning per phase and measure past its limit, each saying what to do.
   std::vector<std::string> warnings(double size, const Material& material, double yield,
                                     const std::string& material_name) const;
@@ -81,6 +87,7 @@ class RangeMonitor {
  private:
   Response* find(const std::string& phase);
   std::vector<std::pair<std::string, Response>> phases_;  // in the order first seen
+  std::vector<std::string> nonlinear_;
 };
 
 }  // namespace softshell::demo

@@ -36,6 +36,7 @@ struct Args {
   std::string material = "rubber";
   double thickness = 0.01;  // a 1 cm rubber skin (an inflatable toy)
   std::string up;
+  std::string model;  // empty: chosen per phase
   bool quiet = false, json = false, no_bullet = false, no_follower = false, no_pictures = false;
 };
 
@@ -62,6 +63,9 @@ void add_options(CLI::App& app, Args& a) {
   app.add_option("--load-scale", a.demo.load_scale,
                  "multiplies the loads the script chose to stay inside the linear range\n(default 1; above about 2 the results leave it, and the demo warns)")
       ->type_name("F")->check(CLI::PositiveNumber.description(""));
+  app.add_option("--model", a.model,
+                 "the scripted phases' model: linear or nonlinear (default: linear while the\nloads stay in its range, nonlinear past it, e.g. --load-scale 4)")
+      ->type_name("linear|nonlinear")->check(CLI::IsMember({"linear", "nonlinear"}).description(""));
   app.add_option("--users", a.demo.users,
                  "2 adds a shared phase: two users' hands (each its own hold) and the Bullet\nboxes on one object at once, a third client following the events (default 1)")
       ->type_name("N")->check(CLI::Range(1, 2).description(""));
@@ -126,6 +130,9 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (!a.up.empty()) a.demo.up_axis = a.up[0] - 'x';
+  if (!a.model.empty()) {
+    a.demo.model = a.model == "nonlinear" ? softshell::DeformationModel::kNonlinear : softshell::DeformationModel::kLinear;
+  }
   a.demo.bullet = !a.no_bullet;
   a.demo.follower = !a.no_follower;
   a.demo.pictures = !a.no_pictures;

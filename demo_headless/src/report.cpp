@@ -96,6 +96,11 @@ std::string format_summary(const DemoReport& r) {
   } else {
     s << "unavailable\n";
   }
+  if (!r.nonlinear_phases.empty()) {
+    s << "  nonlinear model      ";
+    for (size_t i = 0; i < r.nonlinear_phases.size(); ++i) s << (i ? ", " : "") << r.nonlinear_phases[i];
+    s << "\n";
+  }
   s << "  linear range         " << (r.warnings.empty() ? "every result inside" : std::to_string(r.warnings.size()) + " warning(s):")
     << "\n";
   for (const auto& w : r.warnings) s << "    - " << w << "\n";
@@ -143,6 +148,7 @@ std::string format_json(const DemoReport& r) {
        {{"max_displacement", r.final.max_displacement}, {"max_von_mises", optional_number(r.final.max_von_mises)},
         {"max_rotation", r.final.max_rotation}, {"max_strain", optional_number(r.final.max_strain)},
         {"exceeds_yield", r.final.exceeds_yield}}},
+      {"nonlinear_phases", r.nonlinear_phases},
       {"warnings", r.warnings},
       {"notes", r.notes},
       {"outputs", r.outputs},

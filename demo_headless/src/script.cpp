@@ -78,6 +78,7 @@ void grab_phase(Context& c) {
   };
   const double probe = c.probe_length();
   const double full = probe * c.calibrate(at(probe), phase);
+  c.choose_model(phase);
   c.report.loads.grab = full;
   c.say("grab: pulling the top up and out by up to " + mm(full));
   for (int k = 1; k <= c.per_phase; ++k) c.deform(at(full * k / c.per_phase), phase);
@@ -96,6 +97,7 @@ void push_phase(Context& c) {
   };
   const double probe = c.probe_force();
   const double full = probe * c.calibrate(with(probe), phase);
+  c.choose_model(phase);
   c.report.loads.push = full;
   char force[32];
   std::snprintf(force, sizeof force, "%.3g N", full);
@@ -126,6 +128,7 @@ void twist_phase(Context& c) {
   };
   const double probe = c.probe_length();
   const double full = probe * c.calibrate(at(probe), phase);
+  c.choose_model(phase);
   char line[128];
   std::snprintf(line, sizeof line, "twist: lifting a point by up to %s while turning its tangent plane by %.2g degrees",
                 mm(full).c_str(), full * turn_per_length * 180.0 / 3.14159265358979);
@@ -150,6 +153,7 @@ void two_hands_phase(Context& c) {
   };
   const double probe = c.probe_length();
   const double full = probe * c.calibrate(at(probe), phase);
+  c.choose_model(phase);
   c.say("two hands: pulling two points apart by up to " + mm(full) + " each (held at the end)");
   const int steps = c.options.short_script ? c.per_phase : std::max(c.per_phase, c.options.deformations - c.report.deformations);
   for (int k = 1; k <= steps; ++k) c.deform(at(full * k / steps), phase);

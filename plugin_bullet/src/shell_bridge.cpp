@@ -131,6 +131,7 @@ Result<ShellId> ShellBridge::add_shell(std::shared_ptr<Session> session, const G
                                          std::move(*collision_mesh), hold_name);
     // Supports: the app's constraints and loads, then the floor.
     shell->base = settings.supports;
+    shell->base.model = settings.model;
     if (settings.floor.enabled) {
       auto floor = floor_request(shell->mesh->tessellation(), to_isometry(settings.transform), settings.floor);
       if (!floor) throw Exception(floor.error());
@@ -491,6 +492,7 @@ UpdateReport ShellBridge::update() {
     } else {
       // With holds the supports and the floor are a hold of their own: only the forces change.
       DeformationRequest request = shell.settings.holds.enabled ? DeformationRequest{} : shell.base;
+      request.model = shell.settings.model;
       shell.smoothed.append_to(request.forces);
       shell.channel.submit(std::move(request), now);
       shell.submitted.assign(shell.smoothed);

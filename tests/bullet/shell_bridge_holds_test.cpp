@@ -183,6 +183,44 @@ TEST(ShellBridgeHolds, AnotherClientsHoldMovesTheCollisionMeshAndActsWithTheBodi
   scene.world.addRigidBody(sphere);
 }
 
+// ShellSettings::model = kNonlinear: the bridge's floor hold asks for the nonlinear model, so the
+// object's hold state is nonlinear, whoever else acts on it. Another client's hand pushing the
+// plate up by several thicknesses: the collision mesh shows the nonlinear answer (the same as the
+// supports and the hand solved alone with the nonlinear model), which deflects less than the
+// linear one (the clamped plate carries a large deflection partly as a membrane).
+TEST(ShellBridgeHolds, NonlinearModelOptionMakesTheHoldStateNonlinear) {
+  TwoClients clients;
+  const GeomId id = clients.other->upload(plate_mesh(), kPlastic).value().id;
+  test::BulletWorld scene;
+  ShellBridge bridge(scene.world);
+  ShellSettings settings = plate_settings("plate");
+  settings.model = DeformationModel::kNonlinear;
+  const ShellId shell = bridge.add_shell(clients.bridge_session, id, plate_mesh(), settings).value();
+  EXPECT_EQ(clients.other->hold(id, "plate.floor").value().request.model, DeformationModel::kNonlinear);
+
+  const Vec3 push(0.0, 0.0, 200.0);  // N; the linear model lifts the plate by ~9 thicknesses
+  const HeldResult lifted = clients.other->put_hold(id, "hand", hand(push)).value();
+  EXPECT_EQ(lifted.result.model, DeformationModel::kNonlinear);
+  EXPECT_LT(lifted.result.residual, 1e-8);
+  ASSERT_TRUE(shows(bridge, shell, lifted.result.res_id));
+  for (size_t i = 0; i < lifted.result.positions.size(); ++i) {
+    EXPECT_LT((bridge.control_positions(shell)[i] - lifted.result.positions[i]).norm(), 1e-12);
+  }
+  DeformationRequest all = settings.supports;
+  all.forces = hand(push).forces;
+  const DeformationResult linear = clients.other->deform(id, all).value();
+  all.model = DeformationModel::kNonlinear;
+  const DeformationResult alone = clients.other->deform(id, all).value();
+  const size_t at = size_t(test::grid_index(kN, kN / 2 - 2, kN / 2));
+  const double w_linear = linear.positions[at].z(), w_nonlinear = lifted.result.positions[at].z();
+  EXPECT_GT(w_linear, 3.0 * kPlastic.thickness);
+  EXPECT_LT(w_nonlinear, 0.8 * w_linear);
+  EXPECT_GT(w_nonlinear, 0.1 * w_linear);
+  for (size_t i = 0; i < alone.positions.size(); ++i) {
+    EXPECT_LT((lifted.result.positions[i] - alone.positions[i]).norm(), 1e-6 * w_nonlinear) << i;
+  }
+}
+
 TEST(ShellBridgeHolds, TwoBridgesOnOneObjectPickTheirOwnHoldIds) {
   TwoClients clients;
   const GeomId id = clients.other->upload(plate_mesh(), kPlastic).value().id;

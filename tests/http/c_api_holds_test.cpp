@@ -3,6 +3,8 @@
 // the server's message, releases, and a polled subscription that keeps a result that did not fit.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <thread>
 
 #include "session_test_support.h"
@@ -126,6 +128,62 @@ TEST_P(CApiHoldsTest, PutPollReadReleaseAndSubscribe) {
 
   ss_geom_id unknown{};
   EXPECT_EQ(ss_session_subscribe(session, &unknown, 0, &sub), SS_NOT_FOUND);
+}
+
+// The model through the C ABI: ss_request_set_model makes a hold (and a deformation) nonlinear,
+// and ss_*_read_model says how the answer was solved; a bad model is refused with a message.
+TEST_P(CApiHoldsTest, NonlinearModelOfHoldsAndDeformations) {
+  CRequest r;
+  int32_t model = -1;
+  ASSERT_EQ(ss_request_model(r.r, &model), SS_OK);
+  EXPECT_EQ(model, SS_MODEL_LINEAR);
+  EXPECT_EQ(ss_request_set_model(r.r, 2), SS_INVALID_ARGUMENT);
+  EXPECT_NE(std::string(ss_last_error_message()).find("SS_MODEL_NONLINEAR"), std::string::npos);
+  add_pins(r.r);
+  const ss_vec3 down{0, 0, -0.25};
+  ASSERT_EQ(ss_request_add_force(r.r, grid_index(4, 2, 2), &down), SS_OK);
+  ASSERT_EQ(ss_request_set_model(r.r, SS_MODEL_NONLINEAR), SS_OK);
+  ASSERT_EQ(ss_request_model(r.r, &model), SS_OK);
+  EXPECT_EQ(model, SS_MODEL_NONLINEAR);
+
+  ss_hold_put* op = nullptr;
+  ASSERT_EQ(ss_session_put_hold_begin(session, &id, "push", r.r, 10000, &op), SS_OK) << ss_last_error_message();
+  poll_until_ready(op);
+  uint32_t res_id = 0;
+  std::vector<double> held(3 * 25), alone(3 * 25), linear(3 * 25);
+  int32_t count = 0, iterations = 0;
+  double residual = 1.0;
+  ASSERT_EQ(ss_hold_put_read(op, &res_id, nullptr, held.data(), 25, &count), SS_OK) << ss_last_error_message();
+  ASSERT_EQ(ss_hold_put_read_model(op, &model, &iterations, &residual), SS_OK) << ss_last_error_message();
+  EXPECT_EQ(model, SS_MODEL_NONLINEAR);
+  EXPECT_GE(iterations, 1);
+  EXPECT_LT(residual, 1e-8);
+  ss_hold_put_destroy(op);
+
+  // The same request solved alone, nonlinear and linear.
+  ss_deformation* d = nullptr;
+  int32_t ready = 0;
+  for (int32_t m : {SS_MODEL_NONLINEAR, SS_MODEL_LINEAR}) {
+    ASSERT_EQ(ss_request_set_model(r.r, m), SS_OK);
+    ASSERT_EQ(ss_session_deform_begin(session, &id, r.r, &d), SS_OK) << ss_last_error_message();
+    ASSERT_EQ(ss_deformation_wait(d, 60000, &ready), SS_OK);
+    ASSERT_EQ(ready, 1);
+    std::vector<double>& out = m == SS_MODEL_NONLINEAR ? alone : linear;
+    ASSERT_EQ(ss_deformation_read(d, &res_id, out.data(), 25, &count), SS_OK) << ss_last_error_message();
+    ASSERT_EQ(ss_deformation_read_model(d, &model, &iterations, nullptr), SS_OK);
+    EXPECT_EQ(model, m);
+    if (m == SS_MODEL_LINEAR) {
+      EXPECT_EQ(iterations, 0);
+    }
+    ss_deformation_destroy(d);
+  }
+  double same = 0.0, apart = 0.0;
+  for (size_t i = 0; i < held.size(); ++i) {
+    same = std::max(same, std::abs(held[i] - alone[i]));
+    apart = std::max(apart, std::abs(held[i] - linear[i]));
+  }
+  EXPECT_LT(same, 1e-6);
+  EXPECT_GT(apart, 1e-3);  // a push of 2.7 thicknesses: the nonlinear plate deflects less
 }
 
 INSTANTIATE_TEST_SUITE_P(Sessions, CApiHoldsTest,

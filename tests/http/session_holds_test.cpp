@@ -85,6 +85,34 @@ TEST_P(SessionHoldsTest, PutRenewReplaceRelease) {
   EXPECT_EQ(s.hold(id, "pins").error().code, ErrorCode::kNotFound);
 }
 
+// DeformationRequest::model reaches the hold state through every session (the remote one sends
+// such a request as JSON, the layout that carries the field), and the answer says how it was
+// solved; the nonlinear answer is the nonlinear solve of the combined holds.
+TEST_P(SessionHoldsTest, NonlinearHoldsThroughTheSession) {
+  Session& s = *session;
+  ASSERT_TRUE(s.put_hold(id, "pins", pins()));
+  DeformationRequest pull = push(-0.25);
+  pull.model = DeformationModel::kNonlinear;
+  auto held = s.put_hold(id, "push", pull);
+  ASSERT_TRUE(held) << held.error().message;
+  EXPECT_EQ(held->result.model, DeformationModel::kNonlinear);
+  EXPECT_GE(held->result.iterations, 1);
+  EXPECT_LT(held->result.residual, 1e-8);
+  DeformationRequest both = pinned_push(1);
+  both.model = DeformationModel::kNonlinear;
+  auto alone = s.deform(id, both);
+  ASSERT_TRUE(alone) << alone.error().message;
+  for (size_t i = 0; i < alone->positions.size(); ++i) {
+    EXPECT_LT((held->result.positions[i] - alone->positions[i]).norm(), 1e-6) << i;
+  }
+  auto detail = s.hold(id, "push");
+  ASSERT_TRUE(detail) << detail.error().message;
+  EXPECT_EQ(detail->request.model, DeformationModel::kNonlinear);
+  auto linear = s.put_hold(id, "push", push(-0.25));
+  ASSERT_TRUE(linear) << linear.error().message;
+  EXPECT_EQ(linear->result.model, DeformationModel::kLinear);
+}
+
 TEST_P(SessionHoldsTest, RefusalsCarryTheServersMessage) {
   Session& s = *session;
   // Alone, a load leaves the sheet free to move: 422, and no hold is created.

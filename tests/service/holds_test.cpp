@@ -204,9 +204,6 @@ TEST(HoldsTest, BadChangesAreRefusedAtOnce) {
   EXPECT_EQ(code(s.put_hold(id, "x", lift(25, 0.0))), ErrorCode::kInvalidArgument);  // index out of range
   EXPECT_EQ(code(s.put_hold(id, "x", grab({99, 0, 0.5, 0.5}, Vec3::Zero()))), ErrorCode::kInvalidArgument);
   EXPECT_EQ(code(s.put_hold(GeomId{}, "x", pins())), ErrorCode::kNotFound);
-  DeformationRequest nonlinear = pins();
-  nonlinear.model = DeformationModel::kNonlinear;  // hold states are linear: never answered as if
-  EXPECT_EQ(code(s.put_hold(id, "x", nonlinear)), ErrorCode::kUnprocessable);
   EXPECT_EQ(code(s.release_hold(id, "nobody")), ErrorCode::kNotFound);
   EXPECT_FALSE(s.hold(id, "x"));  // nothing was created by the refusals
 }

@@ -80,6 +80,13 @@ void write_xyz(const std::vector<Vec3>& points, double* out, int32_t capacity, i
   });
 }
 
+void write_model(const DeformationResult& r, int32_t* out_model, int32_t* out_iterations, double* out_residual) {
+  const bool nonlinear = r.model == DeformationModel::kNonlinear;
+  if (out_model) *out_model = nonlinear ? SS_MODEL_NONLINEAR : SS_MODEL_LINEAR;
+  if (out_iterations) *out_iterations = nonlinear ? r.iterations : 0;
+  if (out_residual) *out_residual = nonlinear ? r.residual : 0.0;
+}
+
 void write_xyz_f(const std::vector<Vec3>& points, float* out, int32_t capacity, int32_t* out_count, const char* what) {
   write_items(out, capacity, out_count, points.size(), what, [&](float* o) {
     for (size_t i = 0; i < points.size(); ++i) {

@@ -255,6 +255,8 @@ void write_items(T* out, int32_t capacity, int32_t* out_count, size_t items, con
 }
 
 void write_xyz(const std::vector<Vec3>& points, double* out, int32_t capacity, int32_t* out_count, const char* what);
+/// How a result was solved, into the outputs of ss_*_read_model (each nullable).
+void write_model(const DeformationResult& r, int32_t* out_model, int32_t* out_iterations, double* out_residual);
 void write_xyz_f(const std::vector<Vec3>& points, float* out, int32_t capacity, int32_t* out_count, const char* what);
 /// Copies `text` into a caller's char buffer, truncated to fit and always NUL-terminated (no-op for
 /// a NULL buffer or capacity 0).

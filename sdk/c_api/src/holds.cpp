@@ -75,6 +75,17 @@ ss_status ss_hold_put_read(ss_hold_put* operation, uint32_t* out_res_id, uint64_
   });
 }
 
+ss_status ss_hold_put_read_model(ss_hold_put* operation, int32_t* out_model, int32_t* out_iterations,
+                                 double* out_residual) {
+  return guard("ss_hold_put_read_model", [&] {
+    const auto op = live(operation, "operation");
+    if (!op->ready()) throw CStatus{SS_NOT_READY, "the put is still running; poll until it is ready"};
+    const Result<HeldResult>& r = op->future.get();
+    if (!r.ok()) throw Exception(r.error());
+    write_model(r.value().result, out_model, out_iterations, out_residual);
+  });
+}
+
 void ss_hold_put_destroy(ss_hold_put* operation) {
   try {
     std::shared_ptr<void> object =

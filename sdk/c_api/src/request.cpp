@@ -119,6 +119,25 @@ ss_status ss_request_set_pressure(ss_request* request, double pressure) {
   });
 }
 
+ss_status ss_request_set_model(ss_request* request, int32_t model) {
+  return guard("ss_request_set_model", [&] {
+    const auto r = live(request, "request");
+    if (model != SS_MODEL_LINEAR && model != SS_MODEL_NONLINEAR) {
+      throw CStatus{SS_INVALID_ARGUMENT,
+                    "model is SS_MODEL_LINEAR (0) or SS_MODEL_NONLINEAR (1), got " + std::to_string(model)};
+    }
+    r->model = model == SS_MODEL_NONLINEAR ? DeformationModel::kNonlinear : DeformationModel::kLinear;
+  });
+}
+
+ss_status ss_request_model(const ss_request* request, int32_t* out_model) {
+  return guard("ss_request_model", [&] {
+    const auto r = live(request, "request");
+    required(out_model, "out_model");
+    *out_model = r->model == DeformationModel::kNonlinear ? SS_MODEL_NONLINEAR : SS_MODEL_LINEAR;
+  });
+}
+
 ss_status ss_request_counts(const ss_request* request, int32_t* out_vertex_constraints,
                             int32_t* out_lagrange_constraints, int32_t* out_forces, int32_t* out_limit_constraints,
                             int32_t* out_surface_forces) {

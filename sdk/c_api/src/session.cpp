@@ -199,6 +199,17 @@ ss_status ss_deformation_read(ss_deformation* operation, uint32_t* out_res_id, d
   });
 }
 
+ss_status ss_deformation_read_model(ss_deformation* operation, int32_t* out_model, int32_t* out_iterations,
+                                    double* out_residual) {
+  return guard("ss_deformation_read_model", [&] {
+    const auto op = live(operation, "operation");
+    if (!op->ready()) throw CStatus{SS_NOT_READY, "the deformation is still running; poll until it is ready"};
+    const Result<DeformationResult>& r = op->future.get();
+    if (!r.ok()) throw Exception(r.error());
+    write_model(r.value(), out_model, out_iterations, out_residual);
+  });
+}
+
 void ss_deformation_destroy(ss_deformation* operation) {
   try {
     std::shared_ptr<void> object =

@@ -185,7 +185,11 @@ struct RemoteSession::Impl {
   Result<DeformationResult> deform(const GeomId& id, const DeformationRequest& request) {
     auto body = encode(request);
     if (!body) return body.error();
-    auto reply = post(geometry_path(id) + "/results", body->bytes, body->format, preferred_accept());
+    // A nonlinear answer is read as JSON, the layout that says how it was solved (model,
+    // iterations, residual); the binary one is the positions only.
+    const std::string_view accept =
+        request.model == DeformationModel::kNonlinear ? wire::kJsonMediaType : preferred_accept();
+    auto reply = post(geometry_path(id) + "/results", body->bytes, body->format, accept);
     if (!reply) return reply.error();
     return decode_result(*reply);
   }

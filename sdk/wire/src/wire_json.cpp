@@ -771,7 +771,12 @@ Result<LimitComb> decode_limit_comb_json(std::string_view body) {
 std::string encode_result_json(const DeformationResult& result, const HoldVersions& holds) {
   JsonOut out;
   out.raw("{\"res_id\":").integer(result.res_id).raw(",\"positions\":");
-  out.array(result.positions, [&](const Vec3& p) { out.vec3(p); }).raw(",\"holds\":{");
+  out.array(result.positions, [&](const Vec3& p) { out.vec3(p); });
+  if (result.model == DeformationModel::kNonlinear) {  // as in the layout without holds
+    out.raw(",\"model\":\"nonlinear\",\"iterations\":").integer(result.iterations);
+    out.raw(",\"residual\":").number(result.residual);
+  }
+  out.raw(",\"holds\":{");
   for (size_t i = 0; i < holds.size(); ++i) {
     if (i) out.raw(",");
     out.key(holds[i].first).integer(static_cast<int64_t>(holds[i].second));

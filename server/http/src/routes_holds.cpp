@@ -49,7 +49,7 @@ void put_hold(Context& c, const httplib::Request& req, httplib::Response& res) {
   const wire::Format format = body_format_of(req);
   DeformationRequest request =
       decode<DeformationRequest>(c, req, format, &wire::decode_request_binary, &wire::decode_request_json);
-  apply_model_param(req, request);  // (the service refuses nonlinear holds for now)
+  apply_model_param(req, request);
   const service::HoldTicket ticket = value_or_throw(c.service->put_hold(id, hold_id, std::move(request), {ttl}));
   answer(c, req, res, ticket, wait, format);
 }

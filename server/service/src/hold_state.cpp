@@ -194,9 +194,17 @@ HoldVersions versions_of(const HoldMap& holds) {
   return out;
 }
 
+DeformationModel model_of(const HoldMap& holds) {
+  const bool nonlinear = std::any_of(holds.begin(), holds.end(), [](const auto& h) {
+    return h.second->request.model == DeformationModel::kNonlinear;
+  });
+  return nonlinear ? DeformationModel::kNonlinear : DeformationModel::kLinear;
+}
+
 AssembledHoldState assemble(const HoldMap& holds) {
   AssembledHoldState s;
   DeformationRequest& m = s.merged;
+  m.model = model_of(holds);
   for (const auto& [id, v] : holds) {
     const DeformationRequest& r = v->request;
     HoldBlock b;
@@ -222,13 +230,29 @@ AssembledHoldState assemble(const HoldMap& holds) {
   return s;
 }
 
-Result<engine::Solution> solve_hold_state(const engine::Solver& solver, const AssembledHoldState& state) {
+Result<HoldSolution> solve_hold_state(const HoldSolvers& solvers, const AssembledHoldState& state) {
+  HoldSolution out;
   if (state.blocks.empty()) {
-    engine::Solution rest;
-    rest.displacement = Eigen::VectorXd::Zero(solver.model().num_dofs());
-    return rest;
+    out.displacement = Eigen::VectorXd::Zero(solvers.linear.model().num_dofs());
+    return out;
   }
-  return solver.solve(state.merged);
+  if (state.merged.model == DeformationModel::kNonlinear) {
+    const Eigen::VectorXd* previous = solvers.previous;
+    if (previous && previous->size() != solvers.nonlinear.model().num_dofs()) previous = nullptr;
+    auto answer = previous ? solvers.nonlinear.solve(state.merged, *previous) : solvers.nonlinear.solve(state.merged);
+    if (!answer && previous && answer.error().code == ErrorCode::kUnprocessable) {
+      answer = solvers.nonlinear.solve(state.merged);  // from rest, once
+    }
+    if (!answer) return answer.error();
+    out.displacement = std::move(answer->displacement);
+    out.nonlinear = answer->stats;
+    return out;
+  }
+  auto answer = solvers.linear.solve(state.merged);
+  if (!answer) return answer.error();
+  out.displacement = std::move(answer->displacement);
+  out.stats = answer->stats;
+  return out;
 }
 
 bool constraints_consistent(const HoldMap& holds, const std::vector<std::string>& subset,

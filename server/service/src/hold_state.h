@@ -7,11 +7,13 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "softshell/deformation.h"
+#include "softshell/engine/nonlinear_solver.h"
 #include "softshell/engine/solver.h"
 #include "softshell/hold.h"
 #include "memory_budget.h"
@@ -57,22 +59,46 @@ struct HoldBlock {
   size_t limit_begin = 0, limit_end = 0;
 };
 
+/// The model a hold state is solved with: nonlinear when any of its holds asks for it
+/// (PROTOCOL.md "The nonlinear model"), else linear.
+DeformationModel model_of(const HoldMap& holds);
+
 /// The hold state as one request: constraints combined block by block (in hold-id order), loads
-/// added. Valid while the `HoldMap` it was made from lives.
+/// added, `model` = model_of(holds). Valid while the `HoldMap` it was made from lives.
 struct AssembledHoldState {
   std::vector<HoldBlock> blocks;
   DeformationRequest merged;
 };
 AssembledHoldState assemble(const HoldMap& holds);
 
-/// Solves an assembled hold state (no hold: the rest shape, zero displacement).
+/// A solved hold state.
+struct HoldSolution {
+  Eigen::VectorXd displacement;                     ///< 3n
+  engine::SolveStats stats;                         ///< of a linear solve
+  std::optional<engine::NonlinearStats> nonlinear;  ///< of a nonlinear solve
+};
+
+/// The solvers of a geometry's hold state, and where a nonlinear solve starts.
+struct HoldSolvers {
+  const engine::Solver& linear;
+  const engine::NonlinearSolver& nonlinear;
+  /// The previous nonlinear answer of this hold state (3n), the warm start of the next nonlinear
+  /// solve during a drag; null: from rest.
+  const Eigen::VectorXd* previous = nullptr;
+};
+
+/// Solves an assembled hold state with `state.merged.model` (no hold: the rest shape, zero
+/// displacement, linear). A nonlinear solve starts from `solvers.previous`; if it cannot reach
+/// equilibrium from there it is tried once more from rest (the warm start only saves time; a
+/// state the solver reaches only from rest is still solved). Never an unconverged answer: the
+/// engine's kUnprocessable (with its message) instead.
 ///
 /// This is the seam for the engine's cache of constraint blocks keyed by content (issue 12,
 /// "Constraints at full speed"): today it hands `state.merged` to `Solver::solve`, which rebuilds
 /// every hold's rows on each solve; once the engine takes blocks, pass `state.blocks` (rows and
 /// key of each hold) instead, so that holds that did not change between two solves cost almost
 /// nothing and a changed hand about one grab. Nothing else in the service needs to change.
-Result<engine::Solution> solve_hold_state(const engine::Solver& solver, const AssembledHoldState& state);
+Result<HoldSolution> solve_hold_state(const HoldSolvers& solvers, const AssembledHoldState& state);
 
 /// Why the hold state with `hold_id`'s new version `trial.at(hold_id)` could not be solved, as
 /// the error its PUT gets: kUnprocessable (422) if the hold contradicts itself or the state is

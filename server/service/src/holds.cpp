@@ -43,6 +43,13 @@ void apply(HoldMap& holds, const HoldChange& change) {
   }
 }
 
+// The displacement (3n) that takes the rest shape of `mesh` to `positions`.
+Eigen::VectorXd displacement_of(const ControlMesh& mesh, const std::vector<Vec3>& positions) {
+  Eigen::VectorXd u(3 * static_cast<Eigen::Index>(positions.size()));
+  for (size_t i = 0; i < positions.size(); ++i) u.segment<3>(3 * static_cast<Eigen::Index>(i)) = positions[i] - mesh.positions()[i];
+  return u;
+}
+
 bool same(const HoldMap& a, const HoldMap& b) {
   return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](const auto& x, const auto& y) {
            return x.first == y.first && x.second == y.second;
@@ -53,7 +60,7 @@ bool same(const HoldMap& a, const HoldMap& b) {
 struct BatchOutcome {
   HoldMap state;                               // the holds in force afterwards
   std::vector<std::optional<Error>> refusals;  // per change: why it was refused (puts only)
-  std::optional<engine::Solution> solution;    // of `state`; empty if it cannot be solved
+  std::optional<HoldSolution> solution;        // of `state`; empty if it cannot be solved
   Error failure;                               // why not
   DeformationRequest request;                  // `state` as one request (what the result stores)
   bool unchanged = false;                      // `state` is the state it started from: no new result
@@ -62,12 +69,12 @@ struct BatchOutcome {
 
 class BatchSolver {
  public:
-  BatchSolver(const engine::Solver& solver, double length) : solver_(solver), length_(length) {}
+  BatchSolver(const HoldSolvers& solvers, double length) : solvers_(solvers), length_(length) {}
 
-  Result<engine::Solution> solve(const HoldMap& holds, DeformationRequest* merged = nullptr) {
+  Result<HoldSolution> solve(const HoldMap& holds, DeformationRequest* merged = nullptr) {
     ++solves_;
     AssembledHoldState state = assemble(holds);
-    auto solution = capture([&] { return solve_hold_state(solver_, state); });
+    auto solution = capture([&] { return solve_hold_state(solvers_, state); });
     if (solution) {
       if (!solution->displacement.allFinite()) {
         return Error{ErrorCode::kUnprocessable,
@@ -102,7 +109,7 @@ class BatchSolver {
     }
     // Some change cannot stay: apply them one by one, refusing each put whose state fails.
     HoldMap state = committed;
-    std::optional<Result<engine::Solution>> last;  // of `state`, when known
+    std::optional<Result<HoldSolution>> last;  // of `state`, when known
     for (size_t i = 0; i < batch.size(); ++i) {
       const HoldChange& change = batch[i];
       if (!change.version) {
@@ -120,7 +127,7 @@ class BatchSolver {
       }
       const auto kept = state.find(change.hold_id);
       out.refusals[i] = explain_refusal(trial, change.hold_id, kept == state.end() ? 0 : kept->second->version,
-                                        tried.error(), solver_.model().evaluator(), length_);
+                                        tried.error(), solvers_.linear.model().evaluator(), length_);
     }
     if (!last && same(state, committed)) {  // every change refused
       out.state = committed;
@@ -138,7 +145,7 @@ class BatchSolver {
   int solves() const { return solves_; }
 
  private:
-  void finish(BatchOutcome& out, const HoldMap& state, Result<engine::Solution> solution) {
+  void finish(BatchOutcome& out, const HoldMap& state, Result<HoldSolution> solution) {
     out.state = state;
     if (solution) {
       out.solution = std::move(*solution);
@@ -148,7 +155,7 @@ class BatchSolver {
     out.solves = solves_;
   }
 
-  const engine::Solver& solver_;
+  const HoldSolvers& solvers_;
   double length_;
   int solves_ = 0;
 };
@@ -174,6 +181,8 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
   std::vector<HoldChange> batch;
   HoldMap committed;
   std::shared_ptr<const engine::Solver> solver;
+  std::shared_ptr<const engine::NonlinearSolver> nonlinear;
+  ResultPtr previous;  // the newest result of the hold state: a nonlinear one is the warm start
   {
     std::lock_guard lock(e->mu);
     if (stopping.load()) {
@@ -183,15 +192,23 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
       t.pending.clear();
       committed = t.committed;
       solver = e->solver;
+      nonlinear = e->nonlinear;
+      previous = t.latest;
     }
   }
-  if (!solver) {
+  if (!solver || !nonlinear) {
     fail_hold_waiters(*e, shutdown_error(), /*drop_changes=*/false);
     return;
   }
 
   const auto start = Clock::now();
-  BatchSolver solve(*solver, e->geometry->mesh.bounding_diagonal());
+  // A drag of a nonlinear hold starts each solve from the previous answer (the displacement of
+  // the newest result; none when the state was linear).
+  Eigen::VectorXd warm;
+  if (previous && previous->nonlinear) warm = displacement_of(e->geometry->mesh, previous->positions);
+  previous.reset();
+  const HoldSolvers solvers{*solver, *nonlinear, warm.size() ? &warm : nullptr};
+  BatchSolver solve(solvers, e->geometry->mesh.bounding_diagonal());
   BatchOutcome out = solve.run(committed, batch);
   const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
   if (out.solves > 0) hold_solves.fetch_add(1);
@@ -246,8 +263,9 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
     t.message = message;
   } else if (out.solution) {
     auto stored = std::make_shared<StoredResult>();
-    stored->positions = out.solution->positions(e->geometry->mesh);
+    stored->positions = engine::Solution{out.solution->displacement, {}}.positions(e->geometry->mesh);
     stored->stats = out.solution->stats;
+    stored->nonlinear = out.solution->nonlinear;
     stored->request = std::move(out.request);
     stored->holds = versions_of(out.state);
     auto kept = store(*e, std::move(stored), [&] {
@@ -364,13 +382,6 @@ Result<HoldTicket> Service::put_hold(const GeomId& id, const std::string& hold_i
     }
     auto e = impl_->find(id);
     if (!e) return not_found(id);
-    if (request.model == DeformationModel::kNonlinear) {
-      // A hold state is solved with the linear model; answering a nonlinear hold with it would be
-      // a wrong answer, so it is refused until hold states have the nonlinear path.
-      return Error{ErrorCode::kUnprocessable,
-                   "holds are solved with the linear model only for now; send \"model\": \"nonlinear\" requests "
-                   "to POST /geometries/{id}/results instead"};
-    }
     if (auto ok = impl_->validate(*e, request); !ok) return ok.error();
     auto made = make_hold_version(std::move(request), impl_->budget);
     if (!made) {

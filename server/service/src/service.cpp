@@ -226,7 +226,7 @@ void Service::Impl::finish_precompute(const std::shared_ptr<Entry>& e,
       e->model = std::move(*model);
       solver = std::make_shared<const engine::Solver>(e->model, cache);
       e->solver = solver;
-      engine::NonlinearOptions nonlinear_options;
+      engine::NonlinearOptions nonlinear_options = options.nonlinear;
       nonlinear_options.cancel = &stopping;  // a shutdown stops a long nonlinear solve
       e->nonlinear = std::make_shared<const engine::NonlinearSolver>(e->model, cache, nonlinear_options);
       precompute_hist.observe(seconds);  // before the status is visible: stats never lag it

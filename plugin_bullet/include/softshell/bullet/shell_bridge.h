@@ -87,6 +87,12 @@ struct ShellSettings {
   DeformationRequest supports;
   /// Holds or requests (see `ShellHolds`).
   ShellHolds holds;
+  /// The model everything the bridge sends is solved with (its holds, or its requests without
+  /// holds; `supports.model` is replaced by it). kNonlinear for bodies that bend the shell far
+  /// (beyond a fraction of its thickness): large displacements without the linear model's
+  /// stretching, at the cost of Newton iterations per result. A hold state is nonlinear while any
+  /// live hold of it asks for it, so one nonlinear bridge makes the object's state nonlinear.
+  DeformationModel model = DeformationModel::kLinear;
   /// The ground plane; touching parts are held there (added to the supports).
   FloorSettings floor;
   /// Placement of the shell's local frame (its control points' frame) in the world.

@@ -365,6 +365,14 @@ SS_API ss_status ss_request_add_lagrange_constraint(ss_request* request, const i
                                                     const ss_vec3* coefficients, int32_t count, const ss_vec3* values);
 SS_API ss_status ss_request_set_surface_load(ss_request* request, const ss_vec3* load_per_area);
 SS_API ss_status ss_request_set_pressure(ss_request* request, double pressure);
+/** The mechanical model (PROTOCOL.md version 2, "The nonlinear model"). */
+#define SS_MODEL_LINEAR 0     /* the linear Kirchhoff-Love shell (small displacements; the default) */
+#define SS_MODEL_NONLINEAR 1  /* geometrically nonlinear: large displacements and rotations */
+/** The model the request is solved with (SS_MODEL_*; a new or cleared request: SS_MODEL_LINEAR).
+ *  For a hold: the hold state is solved with the nonlinear model while any live hold asks for
+ *  it. A remote session sends a nonlinear request as JSON (the layout that carries the field). */
+SS_API ss_status ss_request_set_model(ss_request* request, int32_t model);
+SS_API ss_status ss_request_model(const ss_request* request, int32_t* out_model);
 /** Holds every part of the tessellation's current shape that touches the plane (interaction.h,
  *  `floor_contact`). Outputs (nullable): the number of points constrained, and 1 if they alone
  *  fix every rigid-body motion. `options` NULL: defaults. */
@@ -471,6 +479,11 @@ SS_API ss_status ss_deformation_wait(ss_deformation* operation, int32_t timeout_
  *  it failed (e.g. SS_UNPROCESSABLE for an undetermined system, message set). May be repeated. */
 SS_API ss_status ss_deformation_read(ss_deformation* operation, uint32_t* out_res_id, double* out_xyz,
                                      int32_t capacity, int32_t* out_count);
+/** How the finished deformation was solved: its model (SS_MODEL_*) and, for the nonlinear model,
+ *  Newton's iterations and the final relative out-of-balance force (0 and 0 for the linear
+ *  model). Any output may be NULL. Status and message as in ss_deformation_read. */
+SS_API ss_status ss_deformation_read_model(ss_deformation* operation, int32_t* out_model, int32_t* out_iterations,
+                                           double* out_residual);
 /** Releases the operation; never blocks (a running request finishes in the background). */
 SS_API void ss_deformation_destroy(ss_deformation* operation);
 /** The newest result if newer than `have`; otherwise waits up to `wait_ms` for one. `*out_has_new`
@@ -499,6 +512,9 @@ SS_API ss_status ss_hold_put_poll(ss_hold_put* operation, int32_t* out_ready);
  *  undetermined), SS_INVALID_ARGUMENT, SS_NOT_FOUND. May be repeated. */
 SS_API ss_status ss_hold_put_read(ss_hold_put* operation, uint32_t* out_res_id, uint64_t* out_version,
                                   double* out_xyz, int32_t capacity, int32_t* out_count);
+/** How the hold state of the answer was solved, as ss_deformation_read_model. */
+SS_API ss_status ss_hold_put_read_model(ss_hold_put* operation, int32_t* out_model, int32_t* out_iterations,
+                                        double* out_residual);
 /** Releases the operation; never blocks (a running put finishes in the background). */
 SS_API void ss_hold_put_destroy(ss_hold_put* operation);
 /** Releases the hold and waits for the first result without it (`*out_res_id`, nullable).

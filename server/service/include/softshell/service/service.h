@@ -76,6 +76,9 @@ struct ServiceOptions {
   /// precomputations' parallel work unless `precompute.executor` says otherwise). Empty: a pool
   /// of the service's own with `precompute_jobs + solve_threads` threads.
   std::shared_ptr<Executor> executor;
+  /// Limits and tolerances of every nonlinear solve (`POST .../results` and hold states with
+  /// `model` = nonlinear).
+  engine::NonlinearOptions nonlinear;
   /// Where the service's messages go (precomputations started/finished/failed).
   Logger logger;
   /// Directory of the persistent store (created if missing); empty = everything in memory only.
