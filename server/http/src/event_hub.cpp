@@ -1,4 +1,4 @@
-// (One file of ~600 lines: the frames, streams, topics and writer shards share private structures
+// (One file of ~700 lines: the frames, streams, topics and writer shards share private structures
 // that nothing outside the event writers needs.)
 #include "event_hub.h"
 
