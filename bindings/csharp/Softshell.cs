@@ -42,6 +42,7 @@ namespace Softshell
         IoError = 10,               // a file could not be read or written
         Internal = 11,              // a bug in softshell; please report it
         Conflict = 12,              // contradicts other clients' holds (HTTP 409)
+        Gone = 13,                  // no longer kept: a result dropped by retention, a deleted geometry (HTTP 410)
         BufferTooSmall = 100,       // capacity below the count
         NotReady = 101,             // an asynchronous operation has not finished
     }

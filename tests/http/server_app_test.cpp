@@ -85,7 +85,8 @@ TEST(ServerAppTest, OptionFormsVersionAndEnvironment) {
   for (const char* env : {"SOFTSHELL_HOST", "SOFTSHELL_PORT", "SOFTSHELL_THREADS", "SOFTSHELL_SOLVE_THREADS",
                           "SOFTSHELL_PRECOMPUTE_JOBS", "SOFTSHELL_CACHE_MB", "SOFTSHELL_STORE_MB", "SOFTSHELL_MAX_BODY_MB",
                           "SOFTSHELL_MAX_CONNECTIONS", "SOFTSHELL_EVENT_WRITERS", "SOFTSHELL_MAX_HOLDS",
-                          "SOFTSHELL_SHUTDOWN_TIMEOUT", "SOFTSHELL_LOG_LEVEL"}) {
+                          "SOFTSHELL_SHUTDOWN_TIMEOUT", "SOFTSHELL_KEEP_RESULTS", "SOFTSHELL_RESULT_BUDGET_MB",
+                          "SOFTSHELL_LOG_LEVEL"}) {
     EXPECT_NE(text.find(env), std::string::npos) << env;
   }
 

@@ -479,7 +479,11 @@ TEST(WireErrorTest, ErrorBodies) {
   EXPECT_NE(raw.message.find("bad gateway"), std::string::npos);
   EXPECT_EQ(wire::http_status(ErrorCode::kInvalidArgument), 400);
   EXPECT_EQ(wire::http_status(ErrorCode::kResourceExhausted), 507);
-  for (int k = 1; k <= static_cast<int>(ErrorCode::kInternal); ++k) {
+  EXPECT_EQ(wire::http_status(ErrorCode::kGone), 410);
+  const Error gone = wire::decode_error_json(wire::encode_error_json(Error{ErrorCode::kGone, "dropped"}), 410);
+  EXPECT_EQ(gone.code, ErrorCode::kGone);
+  EXPECT_EQ(to_string(ErrorCode::kGone), "gone");
+  for (int k = 1; k <= static_cast<int>(ErrorCode::kGone); ++k) {
     const auto code = static_cast<ErrorCode>(k);
     if (code == ErrorCode::kIoError) continue;  // shares 500 with kInternal
     EXPECT_EQ(wire::error_code_for_status(wire::http_status(code)), code) << to_string(code);

@@ -400,6 +400,36 @@ TEST(PersistentServiceTest, RestoresGeometriesAndHistoriesAndContinuesIds) {
   EXPECT_EQ(s.stats().results, 6u);
 }
 
+// Retention and delete reach the data directory: results retention dropped stay dropped (410)
+// after a restart and the kept ones come back; a deleted geometry does not come back.
+TEST(PersistentServiceTest, RetentionAndDeletesSurviveARestart) {
+  TempDir dir;
+  ServiceOptions o = on(dir);
+  o.retention.keep_results = 3;
+  GeomId kept, deleted;
+  {
+    Service s(o);
+    kept = s.upload(exact_grid(), exact_material()).value().id;
+    deleted = s.upload(exact_grid(5), exact_material()).value().id;
+    for (int k = 1; k <= 7; ++k) ASSERT_TRUE(s.deform(kept, pinned_push(k)).get());
+    ASSERT_TRUE(s.deform(deleted, pinned_push(1, 5)).get());
+    ASSERT_TRUE(s.remove(deleted));
+  }
+  Service s(o);
+  const auto list = s.geometries();
+  ASSERT_EQ(list.size(), 1u);
+  EXPECT_EQ(list[0].id, kept);
+  EXPECT_EQ(s.result_ids(kept).value(), (std::vector<uint32_t>{5, 6, 7}));
+  EXPECT_EQ(s.result(kept, 4).error().code, ErrorCode::kGone);
+  EXPECT_EQ(s.result(kept, 8).error().code, ErrorCode::kNotFound);
+  EXPECT_EQ(s.result(kept, 6).value()->res_id, 6u);
+  auto next = s.deform(kept, pinned_push(1)).get();
+  ASSERT_TRUE(next) << next.error().message;
+  EXPECT_EQ((*next)->res_id, 8u);
+  EXPECT_EQ(s.result_ids(kept).value(), (std::vector<uint32_t>{6, 7, 8}));
+  EXPECT_EQ(s.info(deleted).error().code, ErrorCode::kNotFound);
+}
+
 TEST(PersistentServiceTest, RefusesToStartWhenTheStoreDoesNotFitTheBudget) {
   TempDir dir;
   {

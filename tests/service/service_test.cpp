@@ -542,6 +542,7 @@ TEST(ServiceTest, ConcurrentSolvesMatchSequentialOnes) {
 
 TEST(ServiceTest, StoreBudgetRefusesWithoutDroppingAnything) {
   ServiceOptions o = small_options();
+  o.retention.drop_oldest_when_full = false;  // (the default drops the oldest: RetentionTest)
   o.store_bytes = 1000;  // far too small for any geometry
   Service tiny(o);
   auto refused = tiny.upload(exact_grid(), exact_material());

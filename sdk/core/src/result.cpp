@@ -19,6 +19,7 @@ std::string_view to_string(ErrorCode code) noexcept {
     case ErrorCode::kIoError: return "io_error";
     case ErrorCode::kInternal: return "internal";
     case ErrorCode::kConflict: return "conflict";
+    case ErrorCode::kGone: return "gone";
   }
   return "unknown";
 }

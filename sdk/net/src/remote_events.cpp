@@ -81,7 +81,13 @@ class StreamSource final : public EventSubscription::Source {
     std::string error_body;
     bool bad_event = false;
     remote::SseParser parser;
+    bool deleted = false;
     const auto on_event = [&](const remote::SseEvent& e) {
+      if (e.event == "deleted") {  // the geometry was deleted (DELETE /geometries/{id}): the feed ends
+        deleted = true;
+        feed_->fail(wire::decode_error_json(e.data, 410));
+        return;
+      }
       if (!e.event.empty() && e.event != "result") return;  // other kinds are for later versions
       auto held = wire::decode_held_result_json(e.data);
       if (!held) {
@@ -108,7 +114,7 @@ class StreamSource final : public EventSubscription::Source {
             return true;
           }
           const bool ok = parser.feed(std::string_view(data, n), on_event);
-          return ok && !bad_event;
+          return ok && !bad_event && !deleted;
         });
     {
       std::lock_guard lock(mu_);
@@ -116,7 +122,7 @@ class StreamSource final : public EventSubscription::Source {
     }
     if (stopping_.load()) return status == 200;
     if (status == 200) {
-      if (bad_event) return true;  // (the reason is set already)
+      if (bad_event || deleted) return true;  // (the reason is set already)
       feed_->set_connecting(Error{ErrorCode::kUnavailable, res ? "the event stream from " + url_ + " ended"
                                                                : remote::transport_error(res.error(), url_, options_)});
       return true;

@@ -23,6 +23,7 @@ int http_status(ErrorCode code) {
     case ErrorCode::kUnsupportedMediaType: return 415;
     case ErrorCode::kUnprocessable: return 422;
     case ErrorCode::kConflict: return 409;
+    case ErrorCode::kGone: return 410;
     case ErrorCode::kCancelled: return 499;  // the client went away (nginx's convention)
     case ErrorCode::kResourceExhausted: return 507;
     case ErrorCode::kUnavailable: return 503;
@@ -40,6 +41,7 @@ ErrorCode error_code_for_status(int status) {
     case 413: return ErrorCode::kPayloadTooLarge;
     case 415: return ErrorCode::kUnsupportedMediaType;
     case 409: return ErrorCode::kConflict;
+    case 410: return ErrorCode::kGone;
     case 422: return ErrorCode::kUnprocessable;
     case 499: return ErrorCode::kCancelled;
     case 502:

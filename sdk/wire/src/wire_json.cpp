@@ -377,7 +377,7 @@ Error decode_error_json(std::string_view body, int http_status) {
         if (const json* m = find(j, "message"); m && m->is_string()) error.message = m->get<std::string>();
         if (const json* c = find(j, "error"); c && c->is_string()) {
           const std::string code = c->get<std::string>();
-          for (int k = 0; k <= static_cast<int>(ErrorCode::kConflict); ++k) {
+          for (int k = 0; k <= static_cast<int>(ErrorCode::kGone); ++k) {
             if (to_string(static_cast<ErrorCode>(k)) == code) error.code = static_cast<ErrorCode>(k);
           }
         }

@@ -61,6 +61,7 @@ struct Options {
   int max_connections_per_address = -1;  // -1: a quarter of --max-connections
   int event_writers = 0;
   size_t max_holds = 0;
+  long long keep_results = -1, result_budget_mb = -1;  // -1: not given (the service's defaults)
   std::vector<std::string> cors_origins;
   std::string log_level = "info";
   double shutdown_timeout = 5.0;
@@ -89,8 +90,8 @@ void add_options(CLI::App& app, Options& o) {
   app.add_option("--store-mb", o.store_mb,
                  "memory budget in MiB for meshes, precomputed models, results,\n"
                  "holds and event-stream followers (default: half the physical\n"
-                 "memory); what does not fit is refused with 507, nothing stored is\n"
-                 "ever dropped")
+                 "memory); an upload that does not fit is refused with 507; for a\n"
+                 "result, the geometry's oldest results are dropped first")
       ->envname("SOFTSHELL_STORE_MB")->type_name("MIB")->check(range(1, 1LL << 26));
   app.add_option("--max-body-mb", o.max_body_mb, "largest request body in MiB, 1..4096 (default 64); larger\nbodies get 413")
       ->envname("SOFTSHELL_MAX_BODY_MB")->type_name("MIB")->check(range(1, 4096));
@@ -114,6 +115,14 @@ void add_options(CLI::App& app, Options& o) {
                  "every hold-state solve combines all of them; a PUT that would\n"
                  "create one more gets 409")
       ->envname("SOFTSHELL_MAX_HOLDS")->type_name("N")->check(range(1, 65536));
+  app.add_option("--keep-results", o.keep_results,
+                 "results kept per geometry, the newest (default 1000; 0 = no\n"
+                 "limit); an older one is 410 Gone, its id never reused")
+      ->envname("SOFTSHELL_KEEP_RESULTS")->type_name("N")->check(range(0, 1LL << 31));
+  app.add_option("--result-budget-mb", o.result_budget_mb,
+                 "MiB of results kept per geometry, the newest (default 0 = no\n"
+                 "limit but --keep-results and --store-mb)")
+      ->envname("SOFTSHELL_RESULT_BUDGET_MB")->type_name("MIB")->check(range(0, 1LL << 26));
   app.add_option("--cors-origin", o.cors_origins,
                  "let pages from origin O (e.g. http://localhost:3000, or *) call\n"
                  "the API (CORS); repeatable; off by default")
@@ -180,6 +189,8 @@ int main(int argc, char** argv) {
   http_options.max_connections_per_address =
       o.max_connections_per_address >= 0 ? o.max_connections_per_address : std::max(1, http_options.max_connections / 4);
   if (o.max_holds > 0) service_options.max_holds_per_geometry = o.max_holds;
+  if (o.keep_results >= 0) service_options.retention.keep_results = static_cast<size_t>(o.keep_results);
+  if (o.result_budget_mb >= 0) service_options.retention.bytes_per_geometry = static_cast<size_t>(o.result_budget_mb) << 20;
   http_options.cors_origins = o.cors_origins;
   std::vector<std::string> token_warnings;
   if (!o.auth_token_file.empty()) {

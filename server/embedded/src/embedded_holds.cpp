@@ -89,8 +89,9 @@ Result<HoldDetail> EmbeddedSession::hold(const GeomId& id, const std::string& ho
 
 Result<std::unique_ptr<EventSubscription>> EmbeddedSession::subscribe(const GeomId& id, uint32_t after) {
   auto feed = std::make_shared<EventFeed>(after);
-  auto subscription =
-      service_->subscribe(id, [feed](const service::ResultPtr& stored) { feed->offer(held(*stored)); });
+  auto subscription = service_->subscribe(
+      id, [feed](const service::ResultPtr& stored) { feed->offer(held(*stored)); }, 1,
+      [feed](const Error& deleted) { feed->fail(deleted); });  // the geometry was deleted: kGone
   if (!subscription) return subscription.error();
   // After subscribing, so that nothing stored in between is missed (a repeat is ignored by id).
   auto newest = service_->latest_result(id, after, std::chrono::milliseconds(0));

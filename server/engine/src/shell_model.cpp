@@ -388,9 +388,93 @@ size_t ShellModel::memory_bytes() const {
   return sizeof(ShellModel) + nnz * (sizeof(double) + sizeof(int)) +
          static_cast<size_t>(stiffness_.cols() + 1) * sizeof(int) + quadrature_.size() * sizeof(QuadraturePoint) +
          static_cast<size_t>(area_weights_.size() + normal_weights_.size()) * sizeof(double) +
+         static_cast<size_t>(rigid_modes_.size() + zero_modes_.size()) * sizeof(double) +
+         (invisible_.size() + 7) / 8 + (mode_component_.size() + component_of_.size()) * sizeof(int32_t) +
          // the evaluator's mesh copy and Bfr surfaces (estimate)
          static_cast<size_t>(mesh().num_vertices()) * 24 + mesh().face_indices().size() * 4 +
          static_cast<size_t>(mesh().num_faces()) * 512;
+}
+
+size_t ShellModel::estimate_memory_bytes(const ControlMesh& mesh, const PrecomputeOptions& options) {
+  const auto n = static_cast<size_t>(mesh.num_vertices());
+  const int32_t faces = mesh.num_faces();
+  // Faces around each control point (CSR).
+  std::vector<int32_t> start(n + 1, 0), around;
+  for (int32_t f = 0; f < faces; ++f) {
+    for (int32_t v : mesh.face(f)) ++start[static_cast<size_t>(v) + 1];
+  }
+  for (size_t v = 0; v < n; ++v) start[v + 1] += start[v];
+  around.resize(static_cast<size_t>(start[n]));
+  {
+    std::vector<int32_t> fill(start.begin(), start.end() - 1);
+    for (int32_t f = 0; f < faces; ++f) {
+      for (int32_t v : mesh.face(f)) around[static_cast<size_t>(fill[static_cast<size_t>(v)]++)] = f;
+    }
+  }
+  // A face's support (its limit patch's control points) is its one-ring: the corners of every
+  // face that shares a corner with it. The builder's pattern couples A and B if one support has
+  // both, so B's column has the union of the supports that contain B: those of the faces
+  // sharing a corner with a face around B.
+  std::vector<int32_t> ring_start(static_cast<size_t>(faces) + 1, 0), rings;
+  std::vector<int32_t> mark(n, -1);
+  for (int32_t f = 0; f < faces; ++f) {
+    for (int32_t c : mesh.face(f)) {
+      for (int32_t k = start[static_cast<size_t>(c)]; k < start[static_cast<size_t>(c) + 1]; ++k) {
+        for (int32_t v : mesh.face(around[static_cast<size_t>(k)])) {
+          if (mark[static_cast<size_t>(v)] != f) {
+            mark[static_cast<size_t>(v)] = f;
+            rings.push_back(v);
+          }
+        }
+      }
+    }
+    ring_start[static_cast<size_t>(f) + 1] = static_cast<int32_t>(rings.size());
+  }
+  std::fill(mark.begin(), mark.end(), -1);
+  std::vector<int32_t> face_mark(static_cast<size_t>(faces), -1);
+  size_t pairs = 0;  // nonzero 3x3 blocks of K
+  for (size_t b = 0; b < n; ++b) {
+    const auto self = static_cast<int32_t>(b);
+    for (int32_t k = start[b]; k < start[b + 1]; ++k) {
+      for (int32_t c : mesh.face(around[static_cast<size_t>(k)])) {
+        for (int32_t j = start[static_cast<size_t>(c)]; j < start[static_cast<size_t>(c) + 1]; ++j) {
+          const int32_t f = around[static_cast<size_t>(j)];
+          if (face_mark[static_cast<size_t>(f)] == self) continue;
+          face_mark[static_cast<size_t>(f)] = self;
+          for (int32_t r = ring_start[static_cast<size_t>(f)]; r < ring_start[static_cast<size_t>(f) + 1]; ++r) {
+            const int32_t a = rings[static_cast<size_t>(r)];
+            if (mark[static_cast<size_t>(a)] != self) {
+              mark[static_cast<size_t>(a)] = self;
+              ++pairs;
+            }
+          }
+        }
+      }
+    }
+  }
+  // Quadrature points: a Gauss rule per (sub-)face, plus the refinement rings at extraordinary
+  // corners (3 cells per level each) and room for cells split for distortion (a third more).
+  const QuadratureOptions& q = options.quadrature;
+  const size_t gauss = static_cast<size_t>(q.gauss_points) * static_cast<size_t>(q.gauss_points);
+  const size_t ring = q.ev_ring_gauss_points > 0
+                          ? static_cast<size_t>(q.ev_ring_gauss_points) * static_cast<size_t>(q.ev_ring_gauss_points)
+                          : gauss;
+  size_t points = 0;
+  for (int32_t f = 0; f < faces; ++f) {
+    const auto corners = mesh.face(f);
+    const size_t sub = corners.size() == 4 ? 1 : corners.size();
+    size_t irregular = corners.size() == 4 ? 0 : 1;  // the sub-faces of an n-gon meet at its centre
+    for (int32_t c : corners) {
+      const int32_t valence = start[static_cast<size_t>(c) + 1] - start[static_cast<size_t>(c)];
+      if (valence != 4) ++irregular;  // boundary corners too: conservative
+    }
+    points += sub * (gauss + std::min<size_t>(irregular, 4) * static_cast<size_t>(q.ev_refinement_levels) * 3 * ring);
+  }
+  points += points / 3;
+  const size_t components = 1;  // rigid modes: 6 per connected component; one assumed, more are rare
+  return sizeof(ShellModel) + pairs * 9 * (sizeof(double) + sizeof(int)) + (3 * n + 1) * sizeof(int) +
+         points * sizeof(QuadraturePoint) + 4 * n * sizeof(double) + 3 * n * 6 * components * sizeof(double) +
+         n * (2 * sizeof(int32_t)) + n * 24 + mesh.face_indices().size() * 4 + static_cast<size_t>(faces) * 512;
 }
 
 }  // namespace softshell::engine

@@ -27,6 +27,7 @@ constexpr std::array<std::string_view, kEndpointCount> kEndpointNames = {
     "GET /geometries/{id}/render",
     "GET|POST /geometries/{id}/results/{res_id}/stresses",
     "GET /, /app/{file}",
+    "DELETE /geometries/{id}",
     "unmatched",
 };
 

@@ -48,6 +48,7 @@ enum class Endpoint : int {
   kRender,
   kStresses,
   kApp,
+  kDeleteGeometry,
   kUnmatched,
   kCount
 };
@@ -171,7 +172,7 @@ class Router {
 
 // The routes, by resource.
 void add_service_routes(Router& r, Context& c);   // /health, /metrics
-void add_geometry_routes(Router& r, Context& c);  // /geometries, /geometries/{id}, .../status
+void add_geometry_routes(Router& r, Context& c);  // /geometries, /geometries/{id} (GET, DELETE), .../status
 void add_result_routes(Router& r, Context& c);    // .../results..., .../latest_result, .../limit_comb
 void add_hold_routes(Router& r, Context& c);      // .../holds, .../holds/{hold_id}
 void add_event_routes(Router& r, Context& c);     // .../events

@@ -1,4 +1,4 @@
-// (One file of ~600 lines: the frames, streams, topics and writer shards share private structures
+// (One file of ~700 lines: the frames, streams, topics and writer shards share private structures
 // that nothing outside the event writers needs.)
 #include "event_hub.h"
 
@@ -94,6 +94,15 @@ const FramePtr& end_frame() {
   return f;
 }
 
+// The last frame of a stream whose geometry was deleted: an `event: deleted` with the error
+// (the JSON error layout) and, for chunked streams, the end of the body.
+FramePtr deleted_frame(const Error& error) {
+  std::string payload = "event: deleted\ndata: " + wire::encode_error_json(error) + "\n\n";
+  auto f = chunk(payload, 0);
+  f->bytes.append("0\r\n\r\n");
+  return f;
+}
+
 }  // namespace
 
 struct Topic;
@@ -124,6 +133,10 @@ struct Stream {
 struct Topic {
   explicit Topic(size_t shards) : per_shard(shards) {}
   GeomId id;
+  // Set (once) when the geometry is deleted: its streams get `ended` and close, and a new stream
+  // of the same id (a new upload) gets a new topic.
+  std::atomic<bool> deleted{false};
+  FramePtr ended;  // written before `deleted` is set
   // Under Impl::topics_mu:
   std::unique_ptr<service::Subscription> subscription;
   size_t members = 0;  // tickets and streams
@@ -134,6 +147,7 @@ struct Topic {
     ResultPtr incoming;  // under the shard's inbox_mu
     Clock::time_point incoming_at{};
     bool queued = false;
+    bool ending = false;  // under inbox_mu: the geometry was deleted
     ResultPtr latest;    // the shard's thread only, from here on: the newest result it has seen
     Clock::time_point latest_at{};
     std::vector<Stream*> streams;
@@ -223,6 +237,22 @@ struct Shard {
     if (signal) wake();
   }
 
+  // The topic's geometry was deleted: its streams of this shard end (after the frame each writes).
+  void post_end(const std::shared_ptr<Topic>& topic) {
+    bool signal = false;
+    {
+      std::lock_guard lock(inbox_mu);
+      auto& mine = topic->per_shard[index];
+      mine.ending = true;
+      if (!mine.queued) {
+        mine.queued = true;
+        signal = updated.empty() && arrivals.empty();
+        updated.push_back(topic);
+      }
+    }
+    if (signal) wake();
+  }
+
   // False if the shard stops (the caller answers the client).
   bool attach(Arrival a) {
     bool signal = false;
@@ -293,6 +323,7 @@ struct Shard {
     std::vector<std::shared_ptr<Topic>> topics_now;
     std::vector<Arrival> arrived;
     std::vector<std::pair<ResultPtr, Clock::time_point>> results;
+    std::vector<bool> ending;
     bool stop_now = false;
     {
       std::lock_guard lock(inbox_mu);
@@ -301,12 +332,18 @@ struct Shard {
       for (const auto& t : topics_now) {
         auto& mine = t->per_shard[index];
         results.emplace_back(std::move(mine.incoming), mine.incoming_at);
+        ending.push_back(mine.ending);
         mine.incoming.reset();
         mine.queued = false;
       }
       stop_now = stop_requested;
     }
-    for (size_t i = 0; i < topics_now.size(); ++i) publish(*topics_now[i], results[i].first, results[i].second);
+    for (size_t i = 0; i < topics_now.size(); ++i) {
+      publish(*topics_now[i], results[i].first, results[i].second);
+      if (ending[i]) {
+        for (Stream* s : std::vector<Stream*>(topics_now[i]->per_shard[index].streams)) end_deleted(*s);
+      }
+    }
     for (auto& a : arrived) add(std::move(a));
     return stop_now;
   }
@@ -355,6 +392,21 @@ struct Shard {
     }
     if (newest) deliver(*s, newest);
     flush(*s);
+    if (s->fd >= 0 && s->topic->deleted.load()) end_deleted(*s);  // deleted while it was handed over
+  }
+
+  // The geometry was deleted: the `deleted` event and the end of the stream go after the frame
+  // being written (a waiting result is dropped; nothing newer can come).
+  void end_deleted(Stream& s) {
+    if (s.closing || s.fd < 0) return;
+    s.closing = true;
+    if (s.current) {
+      s.next = s.topic->ended;
+    } else {
+      s.current = s.topic->ended;
+      s.offset = 0;
+    }
+    flush(s);
   }
 
   void deliver(Stream& s, const FramePtr& frame) {
@@ -548,7 +600,7 @@ struct EventHub::Impl {
   Result<std::shared_ptr<Topic>> join(const GeomId& id) {
     std::lock_guard lock(topics_mu);
     if (stopping) return Error{ErrorCode::kUnavailable, "the server is shutting down"};
-    if (auto it = topics.find(id); it != topics.end()) {
+    if (auto it = topics.find(id); it != topics.end() && !it->second->deleted.load()) {
       const auto& topic = it->second;
       if (auto ok = topic->subscription->set_followers(topic->members + 1); !ok) return ok.error();
       ++topic->members;
@@ -557,13 +609,23 @@ struct EventHub::Impl {
     auto topic = std::make_shared<Topic>(shards.size());
     topic->id = id;
     std::weak_ptr<Topic> weak = topic;
-    auto subscription = service->subscribe(id, [this, weak](const ResultPtr& r) {
-      if (auto t = weak.lock()) post(t, r);
-    });
+    auto subscription = service->subscribe(
+        id, [this, weak](const ResultPtr& r) {
+          if (auto t = weak.lock()) post(t, r);
+        },
+        1, [this, weak](const Error& error) {
+          // Called under the subscription's slot lock: only flags and the shards' inboxes here
+          // (topics_mu is taken by leave() while it destroys subscriptions).
+          auto t = weak.lock();
+          if (!t) return;
+          t->ended = deleted_frame(error);
+          t->deleted.store(true);
+          for (auto& shard : shards) shard->post_end(t);
+        });
     if (!subscription) return subscription.error();
     topic->subscription = std::move(*subscription);
     topic->members = 1;
-    topics.emplace(id, topic);
+    topics[id] = topic;  // (replaces a deleted geometry's topic, which lives on until its streams end)
     // The newest result stored before the subscription (after it, so that none falls between).
     if (auto newest = service->latest_result(id, 0, std::chrono::milliseconds(0)); newest && *newest) post(topic, *newest);
     return topic;

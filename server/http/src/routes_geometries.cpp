@@ -1,4 +1,4 @@
-// POST /geometries, GET /geometries, GET /geometries/{id}, GET /geometries/{id}/status.
+// POST /geometries, GET /geometries, GET and DELETE /geometries/{id}, GET /geometries/{id}/status.
 #include "context.h"
 
 namespace softshell::http::internal {
@@ -47,6 +47,11 @@ void add_geometry_routes(Router& r, Context& c) {
     res.set_content(wire::encode_geometry_list_json(c.service->geometries()), std::string(wire::kJsonMediaType));
   });
   r.get(R"(/geometries/([^/]+))", Endpoint::kGeometry, [&c](Req req, Res res) { geometry(c, req, res); });
+  // Everything kept for the geometry goes; whoever waits on it gets 410 (Service::remove).
+  r.del(R"(/geometries/([^/]+))", Endpoint::kDeleteGeometry, [&c](Req req, Res res) {
+    value_or_throw(c.service->remove(parse_id(req.matches[1].str())));
+    res.status = 204;
+  });
   r.get(R"(/geometries/([^/]+)/status)", Endpoint::kStatus, [&c](Req req, Res res) {
     const auto info = value_or_throw(c.service->info(parse_id(req.matches[1].str())));
     res.set_content(wire::encode_geometry_info_json(info), std::string(wire::kJsonMediaType));

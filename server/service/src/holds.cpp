@@ -396,6 +396,7 @@ Result<HoldTicket> Service::put_hold(const GeomId& id, const std::string& hold_i
     {
       std::lock_guard lock(e->mu);
       if (impl_->stopping.load()) return shutdown_error();
+      if (e->deleted) return not_found(id);  // deleted since it was found
       if (e->status == GeometryStatus::kFailed) {
         return Error{ErrorCode::kUnprocessable, "the precomputation of geometry " + id.hex() + " failed: " + e->error};
       }

@@ -30,12 +30,6 @@ Result<void> Service::Impl::restore() {
                                                       " is missing"};
       }
     }
-    // Entry::results keeps every id from 1 (retention, which drops results, restores
-    // `dropped_through` as the history's offset).
-    if (g.dropped_through != 0) {
-      return Error{ErrorCode::kInternal, "the data directory " + options.data_dir + " has dropped results of geometry " +
-                                             g.id.hex() + ", which this service cannot restore"};
-    }
   }
   if (!budget.try_reserve(stored_bytes)) {
     return Error{ErrorCode::kResourceExhausted,
@@ -49,7 +43,7 @@ Result<void> Service::Impl::restore() {
   for (RestoredGeometry& g : *loaded) {
     auto e = std::make_shared<Entry>();
     e->id = g.id;
-    const size_t estimate = model_estimate(g.geometry.mesh);
+    const size_t estimate = model_estimate(g.geometry.mesh, options.precompute);
     e->reserved_bytes = mesh_bytes(g.geometry.mesh) + estimate;
     budget.resize(0, estimate);  // may exceed the budget until the model is built (then its real size)
     e->geometry = std::make_shared<const Geometry>(std::move(g.geometry));
@@ -62,8 +56,11 @@ Result<void> Service::Impl::restore() {
       }
     }
     while (e->holds.retired.size() > HoldTable::kMaxRetired) e->holds.retired.erase(e->holds.retired.begin());
+    // Results retention dropped stay dropped (410): the history starts after them.
+    e->first_kept = g.dropped_through + 1;
     e->results.assign(g.results.begin(), g.results.end());
-    e->notified = e->results.size();  // listeners registered from now on see only new results
+    for (const auto& r : g.results) e->result_bytes += result_bytes(*r);
+    e->notified = e->next_res_id() - 1;  // listeners registered from now on see only new results
     total_results.fetch_add(e->results.size());
     restored.push_back(e);
   }

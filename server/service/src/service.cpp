@@ -1,6 +1,7 @@
 // Service: uploads, precomputation, deformations, the result history, long polls, stresses and limit
-// combinations (holds, subscriptions and metrics have their own files). (About 600 lines: the
-// geometry lifecycle and the solve path share the Impl helpers defined here.)
+// combinations (holds, subscriptions and metrics have their own files). (About 800 lines: the
+// geometry lifecycle, upload to delete, the result history with its retention, and the solve path
+// share the Impl helpers defined here.)
 #include "softshell/service/service.h"
 
 #include <unistd.h>
@@ -60,19 +61,19 @@ size_t mesh_bytes(const ControlMesh& mesh) {
          mesh.creases().size() * sizeof(Crease) + mesh.corners().size() * sizeof(Corner);
 }
 
-// A generous estimate of a precomputed model before it exists (replaced by
-// ShellModel::memory_bytes() once built): the stiffness matrix couples each control point with
-// about 49 others (9 values + indices per pair) and every (sub-)face caches the basis at its
-// quadrature points.
-size_t model_estimate(const ControlMesh& mesh) {
-  size_t subfaces = 0;
-  for (int32_t f = 0; f < mesh.num_faces(); ++f) subfaces += mesh.face_size(f) == 4 ? 1 : static_cast<size_t>(mesh.face_size(f));
-  return mesh.positions().size() * 49 * 9 * 12 + subfaces * 16 * 1024;
+// What a precomputed model will take before it exists (replaced by ShellModel::memory_bytes()
+// once built).
+size_t model_estimate(const ControlMesh& mesh, const engine::PrecomputeOptions& options) {
+  return engine::ShellModel::estimate_memory_bytes(mesh, options);
 }
 
 size_t result_bytes(const StoredResult& r) {
   return sizeof(StoredResult) + r.positions.size() * sizeof(Vec3) + request_bytes(r.request) +
          (r.holds ? r.holds->size() * (sizeof(std::pair<std::string, uint64_t>) + 16) : 0);
+}
+
+Error deleted_error(const GeomId& id, const std::string& what) {
+  return Error{ErrorCode::kGone, "geometry " + id.hex() + " was deleted (DELETE /geometries/{id}) " + what};
 }
 
 GeometryInfo Entry::info_locked() const {
@@ -203,7 +204,7 @@ void Service::Impl::start_precompute(const std::shared_ptr<Entry>& e) {
     engine::PrecomputeOptions opts = options.precompute;
     opts.threads = options.precompute_threads;
     opts.progress = [e](double f) { e->progress.store(std::clamp(f, 0.0, 1.0), std::memory_order_relaxed); };
-    opts.cancel = &stopping;
+    opts.cancel = &e->cancel;  // set by Service::remove and by shutdown
     precomputing_now.fetch_add(1);
     const auto start = Clock::now();
     auto model = capture([&] { return engine::ShellModel::build(g.mesh, g.material, opts); });
@@ -222,8 +223,10 @@ void Service::Impl::finish_precompute(const std::shared_ptr<Entry>& e,
   bool launch_holds = false;
   {
     std::lock_guard lock(e->mu);
+    if (e->deleted) return;  // remove() answered everyone and returned the memory; the model is dropped
     if (model) {
       e->model = std::move(*model);
+      e->model_id = e->model->id();
       solver = std::make_shared<const engine::Solver>(e->model, cache);
       e->solver = solver;
       engine::NonlinearOptions nonlinear_options = options.nonlinear;
@@ -266,11 +269,22 @@ Result<ResultPtr> Service::Impl::store(Entry& e, std::shared_ptr<StoredResult> s
     // The id is assigned here, under the geometry's lock, at the moment the result is stored:
     // ids follow the storage order and none is skipped or reused.
     std::lock_guard lock(e.mu);
-    if (!budget.try_reserve(bytes)) {
-      refused_no_memory.fetch_add(1);
-      return no_room(budget, bytes, "another result");
+    if (e.deleted) {
+      // A solve that ran while the geometry was deleted: its result is discarded, and any factor
+      // it put into the cache goes too.
+      if (e.model_id) cache->forget_model(e.model_id);
+      return deleted_error(e.id, "while this request was solved; its result was discarded");
     }
-    stored->res_id = static_cast<uint32_t>(e.results.size() + 1);
+    if (!retain_locked(e, bytes)) {
+      refused_no_memory.fetch_add(1);
+      if (!options.retention.drop_oldest_when_full) return no_room(budget, bytes, "another result");
+      return Error{ErrorCode::kResourceExhausted,
+                   "the server's memory budget (" + megabytes(budget.budget()) + ", " + megabytes(budget.used()) +
+                       " in use) cannot hold another result of " + megabytes(bytes) +
+                       " even without this geometry's older results (the newest is always kept); other geometries "
+                       "hold the rest (delete some, or restart the server with a larger --store-mb)"};
+    }
+    stored->res_id = e.next_res_id();
     stored->stored_at = std::chrono::system_clock::now();
     // On disk before anyone can see it; a failed write uses up no id.
     if (persistent) {
@@ -281,11 +295,59 @@ Result<ResultPtr> Service::Impl::store(Entry& e, std::shared_ptr<StoredResult> s
     }
     total_results.fetch_add(1);  // counters first, so that whoever sees the result also sees them
     e.results.push_back(stored);
+    e.result_bytes += bytes;
+    retain_locked(e, 0);  // the count and byte limits, now that the new result is the newest
     if (locked) locked();
   }
   e.cv.notify_all();
   notify(e);
   return ResultPtr(std::move(stored));
+}
+
+bool Service::Impl::retain_locked(Entry& e, size_t room) {
+  const ResultRetention& keep = options.retention;
+  auto drop_oldest = [&] {
+    const size_t b = result_bytes(*e.results.front());
+    e.results.pop_front();
+    ++e.first_kept;
+    e.result_bytes -= std::min(e.result_bytes, b);
+    budget.release(b);
+    total_results.fetch_sub(1);
+    results_dropped.fetch_add(1);
+  };
+  // What was dropped leaves the data directory too (one transaction for all of them); a failed
+  // write is logged: at a restart the store would only bring back results retention dropped.
+  struct OnDisk {
+    Impl& impl;
+    Entry& e;
+    uint32_t first;
+    ~OnDisk() {
+      if (!impl.persistent || e.first_kept == first) return;
+      if (auto ok = impl.persistent->drop_results_through(e.id, e.first_kept - 1); !ok) {
+        impl.options.logger.error("the data directory did not take the retention of geometry " + e.id.hex() + ": " +
+                                  ok.error().message);
+      }
+    }
+  } on_disk{*this, e, e.first_kept};
+  if (room == 0) {  // after a store: the policy's limits (the newest result always stays)
+    while (e.results.size() > 1 && ((keep.keep_results && e.results.size() > keep.keep_results) ||
+                                    (keep.bytes_per_geometry && e.result_bytes > keep.bytes_per_geometry))) {
+      drop_oldest();
+    }
+    return true;
+  }
+  if (budget.try_reserve(room)) return true;
+  if (!keep.drop_oldest_when_full || e.results.size() <= 1) return false;
+  // Drop only if that makes room: everything but the newest result must free enough (other
+  // geometries may take memory meanwhile; then the loop stops at the newest and refuses).
+  const size_t droppable = e.result_bytes - result_bytes(*e.results.back());
+  const size_t used = budget.used(), total = budget.budget();
+  if (room > total || used - std::min(used, droppable) > total - room) return false;
+  while (e.results.size() > 1) {
+    drop_oldest();
+    if (budget.try_reserve(room)) return true;
+  }
+  return false;
 }
 
 void Service::Impl::notify(Entry& e) {
@@ -295,8 +357,11 @@ void Service::Impl::notify(Entry& e) {
     std::vector<std::shared_ptr<ListenerSlot>> listeners;
     {
       std::lock_guard lock(e.mu);
-      if (e.notified >= e.results.size()) return;
-      result = e.results[e.notified++];
+      // The next id not handed out yet; ids the retention policy dropped meanwhile are skipped.
+      const uint32_t next = std::max(e.notified + 1, e.first_kept);
+      if (e.deleted || next >= e.next_res_id()) return;
+      result = e.results[next - e.first_kept];
+      e.notified = next;
       listeners = e.listeners;
     }
     for (const auto& slot : listeners) {
@@ -382,6 +447,7 @@ void Service::shutdown() {
   // Answer every request that waits for a precomputation and wake every waiter.
   impl_->leases.stop();
   for (const auto& e : impl_->all()) {
+    e->cancel.store(true);
     std::vector<Pending> pending;
     {
       std::lock_guard lock(e->mu);
@@ -412,7 +478,7 @@ Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& m
   // New content: validate before storing anything.
   if (auto ok = capture([&] { return validate_mesh(mesh); }); !ok) return ok.error();
   if (auto ok = material.check(); !ok) return ok.error();
-  const size_t bytes = mesh_bytes(mesh) + model_estimate(mesh);
+  const size_t bytes = mesh_bytes(mesh) + model_estimate(mesh, impl_->options.precompute);
 
   auto entry = std::make_shared<Entry>();
   entry->id = id;
@@ -438,11 +504,78 @@ Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& m
         return saved.error();
       }
     }
+    if (auto dead = impl_->deleted.find(id); dead != impl_->deleted.end()) {
+      // The same content uploaded again after a delete: a new life whose ids continue the old ones.
+      entry->first_kept = entry->first_of_life = dead->second.next_res_id;
+      entry->notified = dead->second.next_res_id - 1;
+      impl_->budget.release(dead->second.bytes());
+      entry->holds.retired = std::move(dead->second.hold_versions);
+      impl_->deleted.erase(dead);
+    }
     impl_->by_id.emplace(id, entry);
     impl_->in_order.push_back(entry);
   }
   impl_->start_precompute(entry);
   return UploadResult{id, true, GeometryStatus::kPrecomputing};
+}
+
+Result<void> Service::remove(const GeomId& id) {
+  if (impl_->stopping.load()) return shutdown_error();
+  std::shared_ptr<Entry> e;
+  std::vector<Pending> pending;
+  std::vector<std::shared_ptr<ListenerSlot>> listeners;
+  std::deque<ResultPtr> results;  // freed outside the locks
+  std::shared_ptr<const engine::ShellModel> model;
+  {
+    std::unique_lock registry(impl_->registry_mu);
+    auto it = impl_->by_id.find(id);
+    if (it == impl_->by_id.end()) return not_found(id);
+    // Off the disk first: a geometry whose delete was answered must not come back at a restart.
+    if (impl_->persistent) {
+      if (auto gone = impl_->persistent->delete_geometry(id); !gone) return gone.error();
+    }
+    e = it->second;
+    impl_->by_id.erase(it);
+    auto& order = impl_->in_order;
+    order.erase(std::remove(order.begin(), order.end(), e), order.end());
+
+    std::lock_guard lock(e->mu);
+    e->deleted = true;
+    e->cancel.store(true);  // a running precomputation stops at its next check
+    // What the next upload of this content continues from (registered with the removal, under
+    // the registry lock, so that an upload sees either the geometry or its tombstone).
+    Tombstone dead;
+    dead.next_res_id = e->next_res_id();
+    dead.hold_versions = e->holds.retired;
+    for (const auto& [hold_id, h] : e->holds.live) dead.hold_versions[hold_id] = h.next_version;
+    impl_->budget.resize(0, dead.bytes());  // small and never refused: a delete always goes through
+    impl_->deleted[id] = std::move(dead);
+
+    pending.swap(e->pending);
+    listeners.swap(e->listeners);
+    results.swap(e->results);
+    impl_->total_results.fetch_sub(results.size());
+    impl_->budget.release(e->reserved_bytes + e->result_bytes);
+    e->reserved_bytes = 0;
+    e->result_bytes = 0;
+    model = std::move(e->model);
+    e->solver.reset();
+    e->nonlinear.reset();
+    e->holds.committed.clear();
+    e->holds.latest.reset();
+    if (e->model_id) impl_->cache->forget_model(e->model_id);
+    impl_->geometries_deleted.fetch_add(1);
+  }
+  e->cv.notify_all();  // latest_result and wait_until_precomputed waiters
+  for (auto& p : pending) p.second(deleted_error(id, "while this request waited for its precomputation"));
+  impl_->fail_hold_waiters(*e, deleted_error(id, "before this hold change was solved"), /*drop_changes=*/true);
+  const Error ended = deleted_error(id, "; no more results follow");
+  for (const auto& slot : listeners) {
+    std::lock_guard call(slot->mu);
+    if (slot->active && slot->ended) slot->ended(ended);
+  }
+  impl_->options.logger.info("geometry " + id.hex() + " was deleted");
+  return {};
 }
 
 std::vector<GeometryInfo> Service::geometries() const {
@@ -471,8 +604,10 @@ Result<GeometryInfo> Service::wait_until_precomputed(const GeomId& id, std::chro
   auto e = impl_->find(id);
   if (!e) return not_found(id);
   std::unique_lock lock(e->mu);
-  e->cv.wait_for(lock, timeout,
-                 [&] { return e->status != GeometryStatus::kPrecomputing || impl_->stopping.load(); });
+  e->cv.wait_for(lock, timeout, [&] {
+    return e->status != GeometryStatus::kPrecomputing || e->deleted || impl_->stopping.load();
+  });
+  if (e->deleted) return deleted_error(id, "while this call waited for its precomputation");
   return e->info_locked();
 }
 
@@ -487,6 +622,10 @@ void Service::deform(const GeomId& id, DeformationRequest request, DeformCallbac
   if (impl_->stopping.load()) {
     lock.unlock();
     return done(shutdown_error());
+  }
+  if (e->deleted) {
+    lock.unlock();
+    return done(not_found(id));
   }
   switch (e->status) {
     case GeometryStatus::kFailed: {
@@ -517,7 +656,7 @@ Result<std::vector<uint32_t>> Service::result_ids(const GeomId& id) const {
   if (!e) return not_found(id);
   std::lock_guard lock(e->mu);
   std::vector<uint32_t> ids(e->results.size());
-  for (size_t i = 0; i < ids.size(); ++i) ids[i] = static_cast<uint32_t>(i + 1);
+  for (size_t i = 0; i < ids.size(); ++i) ids[i] = e->first_kept + static_cast<uint32_t>(i);
   return ids;
 }
 
@@ -525,11 +664,26 @@ Result<ResultPtr> Service::result(const GeomId& id, uint32_t res_id) const {
   auto e = impl_->find(id);
   if (!e) return not_found(id);
   std::lock_guard lock(e->mu);
-  if (res_id == 0 || res_id > e->results.size()) {
+  const uint32_t next = e->next_res_id();
+  auto kept = [&] {
+    return e->results.empty() ? std::string("it keeps none")
+                              : "it keeps " + std::to_string(e->first_kept) + ".." + std::to_string(next - 1);
+  };
+  if (res_id == 0 || res_id >= next) {
     return Error{ErrorCode::kNotFound, "geometry " + id.hex() + " has no result " + std::to_string(res_id) +
-                                           " (it has " + std::to_string(e->results.size()) + ")"};
+                                           " (" + kept() + ")"};
   }
-  return e->results[res_id - 1];
+  if (res_id < e->first_of_life) {
+    return Error{ErrorCode::kGone, "result " + std::to_string(res_id) + " of geometry " + id.hex() +
+                                       " belonged to an earlier upload of it that was deleted (this upload's "
+                                       "results start at " + std::to_string(e->first_of_life) + "; " + kept() + ")"};
+  }
+  if (res_id < e->first_kept) {
+    return Error{ErrorCode::kGone, "result " + std::to_string(res_id) + " of geometry " + id.hex() +
+                                       " is no longer kept: the server keeps the newest results of each geometry (" +
+                                       kept() + "; see --keep-results)"};
+  }
+  return e->results[res_id - e->first_kept];
 }
 
 namespace {
@@ -585,6 +739,7 @@ Result<StressField> Service::stresses(const GeomId& id, uint32_t res_id, const S
   std::shared_ptr<const engine::ShellModel> model;
   {
     auto e = impl_->find(id);
+    if (!e) return not_found(id);  // deleted since
     std::lock_guard lock(e->mu);
     model = e->model;  // a stored result implies a finished precomputation
   }
@@ -617,10 +772,11 @@ Result<ResultPtr> Service::latest_result(const GeomId& id, uint32_t have, std::c
                                          std::stop_token stop) const {
   auto e = impl_->find(id);
   if (!e) return not_found(id);
-  auto newer = [&] { return e->results.size() > have; };
+  auto newer = [&] { return !e->results.empty() && e->results.back()->res_id > have; };
   {
     std::lock_guard lock(e->mu);
     if (newer()) return e->results.back();
+    if (e->deleted) return not_found(id);
   }
   if (wait.count() <= 0) return ResultPtr();
   if (impl_->stopping.load() || stop.stop_requested()) return shutdown_error();
@@ -633,9 +789,11 @@ Result<ResultPtr> Service::latest_result(const GeomId& id, uint32_t have, std::c
   });
   std::unique_lock lock(e->mu);
   impl_->waiters.fetch_add(1);
-  e->cv.wait_for(lock, wait, [&] { return newer() || impl_->stopping.load() || stop.stop_requested(); });
+  e->cv.wait_for(lock, wait,
+                 [&] { return newer() || e->deleted || impl_->stopping.load() || stop.stop_requested(); });
   impl_->waiters.fetch_sub(1);
   if (newer()) return e->results.back();
+  if (e->deleted) return deleted_error(id, "while this request waited for a newer result");
   if (impl_->stopping.load() || stop.stop_requested()) return shutdown_error();
   return ResultPtr();
 }
@@ -674,6 +832,8 @@ ServiceStats Service::stats() const {
     if (e->holds.unsolvable) ++s.hold_states_unsolvable;
   }
   s.results = impl_->total_results.load();
+  s.results_dropped = impl_->results_dropped.load();
+  s.geometries_deleted = impl_->geometries_deleted.load();
   s.precomputations_running = impl_->precomputing_now.load();
   s.waiters = impl_->waiters.load();
   s.store_bytes = impl_->budget.used();

@@ -46,8 +46,10 @@ Error no_room(const MemoryBudget& budget, size_t bytes, const std::string& what)
 // What the service counts against its budget for a control mesh, a model not yet built (an
 // estimate) and a stored result.
 size_t mesh_bytes(const ControlMesh& mesh);
-size_t model_estimate(const ControlMesh& mesh);
+size_t model_estimate(const ControlMesh& mesh, const engine::PrecomputeOptions& options);
 size_t result_bytes(const StoredResult& result);
+// kGone for calls that waited on a geometry that was deleted meanwhile.
+Error deleted_error(const GeomId& id, const std::string& what);
 
 using Pending = std::pair<DeformationRequest, Service::DeformCallback>;
 using HoldPromise = std::shared_ptr<std::promise<Result<HoldOutcome>>>;
@@ -105,7 +107,20 @@ struct HoldTable {
 struct ListenerSlot {
   std::mutex mu;
   ResultListener fn;
+  SubscriptionEnd ended;
   bool active = true;
+};
+
+// What a deleted geometry leaves behind, so that an upload of the same content continues its
+// ids (results and hold versions) instead of reusing them.
+struct Tombstone {
+  uint32_t next_res_id = 1;
+  std::map<std::string, uint64_t, std::less<>> hold_versions;  // next version per hold id
+  size_t bytes() const {
+    size_t b = sizeof(Tombstone) + sizeof(GeomId) + 32;
+    for (const auto& [id, v] : hold_versions) b += id.size() + sizeof(v) + 48;
+    return b;
+  }
 };
 
 // One geometry and everything the service keeps for it.
@@ -122,11 +137,20 @@ struct Entry {
   std::shared_ptr<const engine::Solver> solver;
   // The nonlinear model's solver (its quadrature basis is built by its first solve).
   std::shared_ptr<const engine::NonlinearSolver> nonlinear;
-  std::vector<ResultPtr> results;  // results[k] has res_id k + 1
+  // The results kept (the retention policy drops the oldest): results[k] has res_id
+  // first_kept + k, so ids never shift and are never reused. The next id is next_res_id().
+  std::deque<ResultPtr> results;
+  uint32_t first_kept = 1;
+  uint32_t first_of_life = 1;      // the first id of this upload (above a deleted upload's last)
+  size_t result_bytes = 0;         // what the kept results count against the budget
+  uint32_t next_res_id() const { return first_kept + static_cast<uint32_t>(results.size()); }
   std::vector<Pending> pending;    // requests waiting for the precomputation
   HoldTable holds;
   std::vector<std::shared_ptr<ListenerSlot>> listeners;
-  size_t notified = 0;             // results handed to listeners (under notify_mu)
+  uint32_t notified = 0;           // the newest res_id handed to listeners (under notify_mu)
+  bool deleted = false;            // Service::remove ran: nothing more is stored or waited for
+  uint64_t model_id = 0;           // the model's ShellModel::id() (its factor-cache key)
+  std::atomic<bool> cancel{false}; // the precomputation's cancel flag (delete, shutdown)
 
   std::mutex notify_mu;            // one thread at a time hands results to listeners, in id order
 
@@ -168,6 +192,9 @@ struct Service::Impl {
   Result<ResultPtr> store(Entry& e, std::shared_ptr<StoredResult> stored, const std::function<void()>& locked = {});
   // Hands every stored result not yet handed out to the listeners, in id order.
   void notify(Entry& e);
+  // Drops the geometry's oldest results (never the newest) while the retention policy asks for
+  // it, or until `room` more bytes fit the budget; caller holds e.mu. True if `room` fits.
+  bool retain_locked(Entry& e, size_t room);
 
   // --- holds (holds.cpp) ---
   // True if the geometry's hold-state solve should be queued now: changes wait and no solve is
@@ -199,12 +226,14 @@ struct Service::Impl {
   mutable std::shared_mutex registry_mu;
   std::unordered_map<GeomId, std::shared_ptr<Entry>, internal::GeomIdHash> by_id;
   std::vector<std::shared_ptr<Entry>> in_order;
+  std::unordered_map<GeomId, internal::Tombstone, internal::GeomIdHash> deleted;  // by content id
 
   std::atomic<bool> stopping{false};
   std::mutex shutdown_mu;
   std::atomic<int> precomputing_now{0};
   mutable std::atomic<size_t> waiters{0};
   std::atomic<uint64_t> total_results{0}, solves_ok{0}, solves_failed{0}, refused_no_memory{0};
+  std::atomic<uint64_t> results_dropped{0}, geometries_deleted{0};
   Histogram solve_hist, precompute_hist;
 
   // Holds

@@ -21,7 +21,10 @@ std::string Service::metrics_text() const {
   m.sample("softshell_geometries", PrometheusText::label("status", "precomputing"), d(s.geometries_precomputing));
   m.sample("softshell_geometries", PrometheusText::label("status", "ready"), d(s.geometries_ready));
   m.sample("softshell_geometries", PrometheusText::label("status", "failed"), d(s.geometries_failed));
-  gauge("softshell_results", "Stored results over all geometries.", d(s.results));
+  gauge("softshell_results", "Results kept now over all geometries.", d(s.results));
+  counter("softshell_results_dropped_total", "Results dropped by the retention policy (--keep-results, --result-budget-mb).",
+          d(s.results_dropped));
+  counter("softshell_geometries_deleted_total", "Geometries deleted (DELETE /geometries/{id}).", d(s.geometries_deleted));
   gauge("softshell_precomputations_running", "Precomputations executing now.", d(s.precomputations_running));
   gauge("softshell_pending_solves", "Deformation requests waiting for a precomputation.", d(s.pending_solves));
   gauge("softshell_factor_cache_bytes", "Memory held by cached factorizations.", d(s.cache.bytes));

@@ -59,7 +59,8 @@ size_t Subscription::followers() const {
   return state_->followers;
 }
 
-Result<std::unique_ptr<Subscription>> Service::subscribe(const GeomId& id, ResultListener listener, size_t followers) {
+Result<std::unique_ptr<Subscription>> Service::subscribe(const GeomId& id, ResultListener listener, size_t followers,
+                                                         SubscriptionEnd ended) {
   if (impl_->stopping.load()) return shutdown_error();
   if (!listener) return Error{ErrorCode::kInvalidArgument, "subscribe needs a listener"};
   auto e = impl_->find(id);
@@ -69,9 +70,11 @@ Result<std::unique_ptr<Subscription>> Service::subscribe(const GeomId& id, Resul
   state->entry = e;
   state->slot = std::make_shared<ListenerSlot>();
   state->slot->fn = std::move(listener);
+  state->slot->ended = std::move(ended);
   auto subscription = std::make_unique<Subscription>(state);
   if (auto ok = subscription->set_followers(followers); !ok) return ok.error();
   std::lock_guard lock(e->mu);
+  if (e->deleted) return not_found(id);  // deleted since it was found
   e->listeners.push_back(state->slot);
   return subscription;
 }

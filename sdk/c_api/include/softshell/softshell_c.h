@@ -94,6 +94,7 @@ typedef int32_t ss_status;
 #define SS_IO_ERROR 10             /* a file could not be read or written */
 #define SS_INTERNAL 11             /* a bug in softshell; please report it */
 #define SS_CONFLICT 12             /* contradicts other clients' holds (HTTP 409) */
+#define SS_GONE 13                 /* no longer kept: a result dropped by retention, a deleted geometry (HTTP 410) */
 #define SS_BUFFER_TOO_SMALL 100    /* C ABI only: `capacity` is below `*out_count` */
 #define SS_NOT_READY 101           /* C ABI only: an asynchronous operation has not finished */
 

@@ -39,6 +39,7 @@ enum class ErrorCode : int32_t {
   kIoError = 10,              ///< a file could not be read or written
   kInternal = 11,             ///< a bug in softshell; please report it
   kConflict = 12,             ///< contradicts the state others made: a hold against other holds (HTTP 409)
+  kGone = 13,                 ///< existed once, no longer kept: a result dropped by retention, a deleted geometry (HTTP 410)
 };
 
 /// Short stable name of a code, e.g. "invalid_argument" (the `error` field of HTTP errors).

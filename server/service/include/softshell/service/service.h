@@ -45,6 +45,21 @@
 
 namespace softshell::service {
 
+/// Which results a geometry keeps (`ServiceOptions::retention`). The oldest go first; the newest
+/// result of a geometry is never dropped. A dropped result's id is never used again: asking for it
+/// is kGone (HTTP 410), while an id never stored stays kNotFound (404).
+struct ResultRetention {
+  /// Results kept per geometry (the newest ones); 0 = no count limit. At spot_quadrangulated's
+  /// ~70 KB per result the default keeps ~70 MB per geometry.
+  size_t keep_results = 1000;
+  /// Bytes of results kept per geometry (as counted against `store_bytes`); 0 = no byte limit.
+  size_t bytes_per_geometry = 0;
+  /// When a new result does not fit the store budget: true drops the geometry's own oldest
+  /// results until it fits (only a result that does not fit even then is refused with 507);
+  /// false refuses it with 507 at once (nothing stored is dropped to make room).
+  bool drop_oldest_when_full = true;
+};
+
 /// Configuration of a `Service`.
 struct ServiceOptions {
   /// Workers that run solves, i.e. solves running at once (0 = std::thread::hardware_concurrency()).
@@ -58,9 +73,12 @@ struct ServiceOptions {
   /// Budget of the CHOLMOD factor cache (bytes); least recently used factors are evicted.
   size_t cache_bytes = size_t{1} << 30;
   /// Budget for everything the service keeps (bytes): control meshes, precomputed models and
-  /// results. Geometries and results are never dropped to make room: an upload or a result that
-  /// does not fit is refused with kResourceExhausted (HTTP 507). 0 = half the physical memory.
+  /// results. Geometries are never dropped to make room (an upload that does not fit is refused
+  /// with kResourceExhausted, HTTP 507); results are dropped oldest first as `retention` says.
+  /// 0 = half the physical memory.
   size_t store_bytes = 0;
+  /// Which results each geometry keeps (bounds a long session's memory).
+  ResultRetention retention;
   /// Quadrature and limit-evaluation options of every precomputation (its `threads`,
   /// `progress` and `cancel` are set by the service).
   engine::PrecomputeOptions precompute;
@@ -118,7 +136,9 @@ struct ServiceStats {
   size_t geometries_precomputing = 0;
   size_t geometries_ready = 0;
   size_t geometries_failed = 0;
-  uint64_t results = 0;                 ///< stored results over all geometries
+  uint64_t results = 0;                 ///< results kept now over all geometries
+  uint64_t results_dropped = 0;         ///< results dropped by the retention policy (not by deletes)
+  uint64_t geometries_deleted = 0;      ///< `Service::remove` calls that deleted a geometry
   int precomputations_running = 0;      ///< builds executing right now
   size_t pending_solves = 0;            ///< requests waiting for a precomputation
   size_t waiters = 0;                   ///< latest_result calls waiting right now
@@ -175,6 +195,9 @@ struct HoldTicket {
 /// on the thread that stored it (a solve worker). It must return quickly, and must not destroy
 /// its own `Subscription`.
 using ResultListener = std::function<void(const ResultPtr&)>;
+/// Called at most once, when the subscribed geometry is deleted (`Service::remove`), with the
+/// kGone error to pass on; no result follows. The same rules as for `ResultListener`.
+using SubscriptionEnd = std::function<void(const Error&)>;
 
 /// A registration with a geometry's results (`Service::subscribe`). Destroying it unsubscribes;
 /// once the destructor has returned, the listener is not called again.
@@ -202,7 +225,8 @@ class Subscription {
 /// Errors: kInvalidArgument (malformed input, HTTP 400), kNotFound (404), kUnprocessable
 /// (unusable mesh or material, undetermined or inconsistent system, failed precomputation; 422),
 /// kResourceExhausted (the store budget; 507), kUnavailable (shutting down; 503), kConflict (a hold
-/// that contradicts other holds, or a release that leaves the rest unsolvable; 409).
+/// that contradicts other holds, or a release that leaves the rest unsolvable; 409), kGone (a
+/// result dropped by the retention policy, or a geometry deleted while the call waited; 410).
 ///
 /// Thread-safety: every member function may be called concurrently from any number of threads.
 ///
@@ -234,6 +258,19 @@ class Service {
   /// of UTF-8 without control characters).
   Result<UploadResult> upload(ControlMesh mesh, Material material, std::string name_space = "");
 
+  /// Deletes a geometry and everything kept for it: its results, holds, model, factor-cache
+  /// entries and memory (returned to the budget at once; a running precomputation is cancelled,
+  /// a running solve finishes and its result is discarded). Everyone waiting on it is answered
+  /// kGone: requests waiting for the precomputation, `latest_result` waiters, hold changes
+  /// waiting for a solve, and subscriptions (their `SubscriptionEnd`). kNotFound if unknown.
+  ///
+  /// The same content can be uploaded again; it is a new geometry (precomputed again, no
+  /// holds), but its result ids continue after the deleted one's last id (the service remembers
+  /// the last id and hold versions of a deleted geometry, about 100 bytes each), so that no
+  /// client that cached (geometry, res_id) pairs or holds a `have` can take an old result for a
+  /// new one.
+  Result<void> remove(const GeomId& id);
+
   /// Every geometry, in upload order.
   std::vector<GeometryInfo> geometries() const;
   /// One geometry's status, progress and result count.
@@ -254,14 +291,17 @@ class Service {
   /// The same as a future.
   std::future<Result<ResultPtr>> deform(const GeomId& id, DeformationRequest request);
 
-  /// Ids of a geometry's results, oldest first (1..count).
+  /// Ids of the results a geometry keeps, oldest first (consecutive; the retention policy drops
+  /// the oldest, so the first may be above 1).
   Result<std::vector<uint32_t>> result_ids(const GeomId& id) const;
-  /// One result; kNotFound if the geometry or the result is unknown.
+  /// One result; kNotFound if the geometry is unknown or the result was never stored, kGone if
+  /// the retention policy dropped it (or it belonged to a deleted upload of this geometry).
   Result<ResultPtr> result(const GeomId& id, uint32_t res_id) const;
 
   /// The newest result if its id is greater than `have`; otherwise waits up to `wait` for one.
   /// Returns nullptr if none arrived in time. kUnavailable if the service shuts down or `stop`
-  /// is requested while waiting. Waiters are woken as soon as a result is stored.
+  /// is requested while waiting, kGone if the geometry is deleted meanwhile. Waiters are woken as
+  /// soon as a result is stored.
   Result<ResultPtr> latest_result(const GeomId& id, uint32_t have, std::chrono::milliseconds wait,
                                   std::stop_token stop = {}) const;
 
@@ -303,8 +343,10 @@ class Service {
   /// the returned subscription is destroyed. The newest result stored before it is available
   /// from `latest_result(id, have, 0)`, which a subscriber calls *after* subscribing (a result
   /// may then be seen twice; ids tell). `followers` counts against the memory budget (see
-  /// `Subscription::set_followers`). kNotFound, kResourceExhausted, kUnavailable.
-  Result<std::unique_ptr<Subscription>> subscribe(const GeomId& id, ResultListener listener, size_t followers = 1);
+  /// `Subscription::set_followers`). `ended` is called if the geometry is deleted. kNotFound,
+  /// kResourceExhausted, kUnavailable.
+  Result<std::unique_ptr<Subscription>> subscribe(const GeomId& id, ResultListener listener, size_t followers = 1,
+                                                  SubscriptionEnd ended = {});
 
   ServiceStats stats() const;
   /// Every counter and gauge of `stats()` in Prometheus text format (families `softshell_*`),
