@@ -578,7 +578,7 @@ TEST(ServiceTest, StoreBudgetRefusesWithoutDroppingAnything) {
   }
   EXPECT_EQ(stored, 3);
   EXPECT_EQ(last.code, ErrorCode::kResourceExhausted) << last.message;
-  EXPECT_NE(last.message.find("never dropped"), std::string::npos) << last.message;
+  EXPECT_NE(last.message.find("larger --store-mb"), std::string::npos) << last.message;
   // Nothing dropped, no id consumed by the refusals.
   EXPECT_EQ(s.result_ids(id)->size(), 3u);
   EXPECT_EQ(s.deform(id, heavy).get().error().code, ErrorCode::kResourceExhausted);

@@ -51,8 +51,8 @@ Error no_room(const MemoryBudget& budget, size_t bytes, const std::string& what)
   return Error{ErrorCode::kResourceExhausted, "the server's memory budget (" + megabytes(budget.budget()) + ", " +
                                                   megabytes(budget.used()) + " in use) cannot hold " + what + " of " +
                                                   megabytes(bytes) +
-                                                  "; what is stored is never dropped to make room (restart the server "
-                                                  "with a larger --store-mb)"};
+                                                  "; free some (delete geometries, release holds) or restart the server "
+                                                  "with a larger --store-mb"};
 }
 
 size_t mesh_bytes(const ControlMesh& mesh) {
