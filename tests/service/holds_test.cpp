@@ -11,32 +11,20 @@
 #include <thread>
 
 #include "server_test_support.h"
+#include "service_test_support.h"
 #include "softshell/request_validation.h"
 #include "softshell/service/service.h"
 
 namespace softshell::service {
 namespace {
 
+using test::small_options;
+using test::upload_ready;
+
 using test::exact_grid;
 using test::exact_material;
 using test::grid_index;
 using std::chrono::milliseconds;
-
-ServiceOptions small_options() {
-  ServiceOptions o;
-  o.precompute_threads = 1;
-  o.store_bytes = size_t{256} << 20;
-  o.cache_bytes = size_t{64} << 20;
-  return o;
-}
-
-GeomId upload_ready(Service& s, const ControlMesh& mesh = exact_grid()) {
-  auto up = s.upload(mesh, exact_material());
-  EXPECT_TRUE(up) << up.error().message;
-  auto info = s.wait_until_precomputed(up->id, milliseconds(60000));
-  EXPECT_TRUE(info && info->status == GeometryStatus::kReady);
-  return up->id;
-}
 
 DeformationRequest pins(int n = 4) {
   DeformationRequest r;

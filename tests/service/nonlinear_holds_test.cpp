@@ -10,10 +10,14 @@
 #include <Eigen/Geometry>
 
 #include "server_test_support.h"
+#include "service_test_support.h"
 #include "softshell/service/service.h"
 
 namespace softshell::service {
 namespace {
+
+using test::small_options;
+using test::upload_ready;
 
 using test::exact_grid;
 using test::exact_material;
@@ -21,22 +25,6 @@ using test::grid_index;
 using std::chrono::milliseconds;
 
 constexpr int kN = 4;  // exact_grid(4): 4 x 4 faces over [0, 1]^2, 25 control points
-
-ServiceOptions small_options() {
-  ServiceOptions o;
-  o.precompute_threads = 1;
-  o.store_bytes = size_t{256} << 20;
-  o.cache_bytes = size_t{64} << 20;
-  return o;
-}
-
-GeomId upload_ready(Service& s) {
-  auto up = s.upload(exact_grid(kN), exact_material());
-  EXPECT_TRUE(up) << up.error().message;
-  auto info = s.wait_until_precomputed(up->id, milliseconds(60000));
-  EXPECT_TRUE(info && info->status == GeometryStatus::kReady);
-  return up->id;
-}
 
 Result<HoldOutcome> outcome(const HoldTicket& t) {
   if (t.outcome.wait_for(std::chrono::seconds(60)) != std::future_status::ready) {
@@ -126,7 +114,7 @@ double max_motion(const StoredResult& a) {
 // from the previous answer: fewer iterations than the same request from rest, same answer.
 TEST(NonlinearHoldsTest, TurningAnEdgeTurnsTheWholePlateRigidly) {
   Service s(small_options());
-  const GeomId id = upload_ready(s);
+  const GeomId id = upload_ready(s, exact_grid(kN));
   for (double degrees : {30.0, 90.0}) {
     auto held = put(s, id, "edge", nonlinear(turn_edge(degrees)));
     ASSERT_TRUE(held && *held) << (held ? "no result" : held.error().message);
@@ -176,7 +164,7 @@ TEST(NonlinearHoldsTest, TurningAnEdgeTurnsTheWholePlateRigidly) {
 // odd in the load, so its nonlinear correction is cubic (relative: quadratic).
 TEST(NonlinearHoldsTest, SmallNonlinearHoldAgreesWithTheLinearOneToFirstOrder) {
   Service s(small_options());
-  const GeomId id = upload_ready(s);
+  const GeomId id = upload_ready(s, exact_grid(kN));
   DeformationRequest pins;
   pins.vertex_constraints = test::pinned_corners(kN);
   ASSERT_TRUE(put(s, id, "pins", pins));  // linear: the state is nonlinear when any hold asks
@@ -217,7 +205,7 @@ TEST(NonlinearHoldsTest, SmallNonlinearHoldAgreesWithTheLinearOneToFirstOrder) {
 // is solved linearly again: the answer is the linear solve of the remaining holds, exactly.
 TEST(NonlinearHoldsTest, ReleasingTheLastNonlinearHoldGoesBackToLinear) {
   Service s(small_options());
-  const GeomId id = upload_ready(s);
+  const GeomId id = upload_ready(s, exact_grid(kN));
   ASSERT_TRUE(put(s, id, "pins", test::pinned_push(1, kN)));  // corners pinned and a push, linear
   DeformationRequest grab;
   grab.limit_constraints.push_back({{5, 0, 0.5, 0.5}, Vec3(0.0, 0.0, 0.3), std::nullopt, std::nullopt});
@@ -243,7 +231,7 @@ TEST(NonlinearHoldsTest, UnconvergedNonlinearHoldIsRefusedAndTheStateStays) {
   ServiceOptions o = small_options();
   o.nonlinear.max_iterations = 3;  // so that a large pull cannot converge
   Service s(o);
-  const GeomId id = upload_ready(s);
+  const GeomId id = upload_ready(s, exact_grid(kN));
   DeformationRequest pins;
   pins.vertex_constraints = test::pinned_corners(kN);
   auto first = put(s, id, "pins", pins);

@@ -7,33 +7,20 @@
 #include <thread>
 
 #include "server_test_support.h"
+#include "service_test_support.h"
 #include "softshell/request_validation.h"
 #include "softshell/service/service.h"
 
 namespace softshell::service {
 namespace {
 
+using test::small_options;
+using test::upload_ready;
+
 using test::exact_grid;
 using test::exact_material;
 using test::pinned_push;
 using std::chrono::milliseconds;
-
-ServiceOptions small_options() {
-  ServiceOptions o;
-  o.precompute_threads = 1;
-  o.solve_threads = 2;
-  o.store_bytes = size_t{256} << 20;
-  o.cache_bytes = size_t{64} << 20;
-  return o;
-}
-
-GeomId upload_ready(Service& s, const ControlMesh& mesh = exact_grid()) {
-  auto up = s.upload(mesh, exact_material());
-  EXPECT_TRUE(up) << up.error().message;
-  auto info = s.wait_until_precomputed(up->id, milliseconds(30000));
-  EXPECT_TRUE(info && info->status == GeometryStatus::kReady) << (info ? info->error : info.error().message);
-  return up->id;
-}
 
 uint32_t deform_ok(Service& s, const GeomId& id, int k) {
   auto r = s.deform(id, pinned_push(k)).get();
@@ -45,7 +32,7 @@ uint32_t deform_ok(Service& s, const GeomId& id, int k) {
 ControlMesh slow_mesh() { return test::make_grid(48, 48); }
 
 TEST(RetentionTest, KeepsTheNewestWithStableIdsGoneForDroppedNotFoundForNeverStored) {
-  ServiceOptions o = small_options();
+  ServiceOptions o = small_options(2);
   o.retention.keep_results = 3;
   Service s(o);
   const GeomId id = upload_ready(s);
@@ -79,13 +66,13 @@ TEST(RetentionTest, KeepsTheNewestWithStableIdsGoneForDroppedNotFoundForNeverSto
 }
 
 TEST(RetentionTest, ByteBudgetPerGeometryKeepsAtLeastTheNewest) {
-  Service probe(small_options());
+  Service probe(small_options(2));
   const GeomId pid = upload_ready(probe);
   const size_t geometry = probe.stats().store_bytes;
   deform_ok(probe, pid, 1);
   const size_t one = probe.stats().store_bytes - geometry;  // one result's bytes
 
-  ServiceOptions o = small_options();
+  ServiceOptions o = small_options(2);
   o.retention.keep_results = 0;  // no count limit
   o.retention.bytes_per_geometry = 4 * one + one / 2;
   Service s(o);
@@ -106,13 +93,13 @@ TEST(RetentionTest, FullStoreDropsTheGeometrysOldestInsteadOfRefusing) {
   // Room for the geometry and three heavy results (their requests make them ~0.6 MB each).
   DeformationRequest heavy = pinned_push(1);
   heavy.forces.assign(20000, PointForce{test::grid_index(4, 2, 2), Vec3(0, 0, -1e-5)});
-  Service probe(small_options());
+  Service probe(small_options(2));
   const GeomId pid = upload_ready(probe);
   const size_t geometry_bytes = probe.stats().store_bytes;
   ASSERT_TRUE(probe.deform(pid, heavy).get());
   const size_t result_bytes = probe.stats().store_bytes - geometry_bytes;
 
-  ServiceOptions o = small_options();
+  ServiceOptions o = small_options(2);
   o.store_bytes = geometry_bytes + 3 * result_bytes + result_bytes / 2;
   Service s(o);
   const GeomId id = upload_ready(s);
@@ -137,7 +124,7 @@ TEST(RetentionTest, FullStoreDropsTheGeometrysOldestInsteadOfRefusing) {
 }
 
 TEST(RetentionTest, ALongRunStaysWithinTheBound) {
-  ServiceOptions o = small_options();
+  ServiceOptions o = small_options(2);
   o.retention.keep_results = 5;
   Service s(o);
   const GeomId id = upload_ready(s);
@@ -156,7 +143,7 @@ TEST(RetentionTest, ALongRunStaysWithinTheBound) {
 }
 
 TEST(DeleteTest, UnknownGeometryIsNotFound) {
-  Service s(small_options());
+  Service s(small_options(2));
   EXPECT_EQ(s.remove(GeomId{}).error().code, ErrorCode::kNotFound);
   const GeomId id = upload_ready(s);
   ASSERT_TRUE(s.remove(id));
@@ -170,7 +157,7 @@ TEST(DeleteTest, UnknownGeometryIsNotFound) {
 }
 
 TEST(DeleteTest, ReleasesEveryoneWaitingWithGone) {
-  ServiceOptions o = small_options();
+  ServiceOptions o = small_options(2);
   o.precompute_jobs = 1;
   Service s(o);
   const size_t empty = s.stats().store_bytes;
@@ -227,7 +214,7 @@ TEST(DeleteTest, ReleasesEveryoneWaitingWithGone) {
 }
 
 TEST(DeleteTest, ReturnsTheMemoryAndAReuploadContinuesTheIds) {
-  Service s(small_options());
+  Service s(small_options(2));
   const size_t empty = s.stats().store_bytes;
   const GeomId id = upload_ready(s);
   for (int k = 1; k <= 3; ++k) deform_ok(s, id, k);
@@ -273,7 +260,7 @@ TEST(DeleteTest, ReturnsTheMemoryAndAReuploadContinuesTheIds) {
 TEST(DeleteTest, ASolveRunningDuringTheDeleteIsDiscarded) {
   // Many solves queued on one worker; the delete comes while they run: each is answered (a
   // result stored before the delete, or kGone/kNotFound after it), none is stored afterwards.
-  ServiceOptions o = small_options();
+  ServiceOptions o = small_options(2);
   o.solve_threads = 1;
   Service s(o);
   const size_t empty = s.stats().store_bytes;

@@ -11,10 +11,14 @@
 #include <thread>
 
 #include "server_test_support.h"
+#include "service_test_support.h"
 #include "softshell/content_id.h"
 
 namespace softshell::service {
 namespace {
+
+using test::small_options;
+using test::upload_ready;
 
 using test::exact_grid;
 using test::exact_material;
@@ -22,22 +26,6 @@ using test::pinned_push;
 using test::seconds_since;
 using Clock = std::chrono::steady_clock;
 using std::chrono::milliseconds;
-
-ServiceOptions small_options() {
-  ServiceOptions o;
-  o.precompute_threads = 1;
-  o.store_bytes = size_t{256} << 20;
-  o.cache_bytes = size_t{64} << 20;
-  return o;
-}
-
-GeomId upload_ready(Service& s, const ControlMesh& mesh = exact_grid(), std::string ns = "") {
-  auto up = s.upload(mesh, exact_material(), std::move(ns));
-  EXPECT_TRUE(up) << up.error().message;
-  auto info = s.wait_until_precomputed(up->id, milliseconds(30000));
-  EXPECT_TRUE(info && info->status == GeometryStatus::kReady) << (info ? info->error : info.error().message);
-  return up->id;
-}
 
 // A mesh whose precomputation takes long enough to observe "precomputing" (hundreds of ms).
 ControlMesh slow_mesh() { return test::make_grid(48, 48); }
