@@ -168,6 +168,32 @@ TEST(ServiceTest, DeformationWaitsForThePrecomputation) {
   EXPECT_EQ(s.info(up->id)->status, GeometryStatus::kReady);
 }
 
+// Requests waiting for a precomputation are bounded in number (one more is refused with a
+// retry) and count against the store while they wait.
+TEST(ServiceTest, RequestsWaitingForThePrecomputationAreBoundedAndBudgeted) {
+  ServiceOptions o = small_options();
+  o.precompute_jobs = 1;
+  o.max_waiting_per_geometry = 2;
+  Service s(o);
+  ASSERT_TRUE(s.upload(slow_mesh(), exact_material()));  // the small geometry waits behind it
+  auto up = s.upload(exact_grid(), exact_material());
+  ASSERT_TRUE(up);
+  const size_t before = s.stats().store_bytes;
+  auto a = s.deform(up->id, pinned_push(1));
+  auto b = s.deform(up->id, pinned_push(2));
+  ASSERT_EQ(s.info(up->id)->status, GeometryStatus::kPrecomputing);
+  EXPECT_GT(s.stats().store_bytes, before);  // the two waiting requests
+  auto c = s.deform(up->id, pinned_push(3)).get();
+  ASSERT_FALSE(c);
+  EXPECT_EQ(c.error().code, ErrorCode::kUnavailable);
+  EXPECT_NE(c.error().message.find("wait for the precomputation"), std::string::npos) << c.error().message;
+  ASSERT_EQ(a.wait_for(std::chrono::seconds(60)), std::future_status::ready);
+  EXPECT_EQ(a.get().value()->res_id, 1u);
+  EXPECT_EQ(b.get().value()->res_id, 2u);
+  // Once it is ready, requests are taken again.
+  EXPECT_EQ(s.deform(up->id, pinned_push(3)).get().value()->res_id, 3u);
+}
+
 TEST(ServiceTest, FailedPrecomputationIsReportedNotHung) {
   ServiceOptions o = small_options();
   o.precompute.quadrature.gauss_points = 0;  // the engine refuses this: every build fails

@@ -638,9 +638,29 @@ void Service::deform(const GeomId& id, DeformationRequest request, DeformCallbac
       lock.unlock();
       return impl_->submit_solve(e, std::move(solver), std::move(request), std::move(done));
     }
-    case GeometryStatus::kPrecomputing:
-      e->pending.emplace_back(std::move(request), std::move(done));
+    case GeometryStatus::kPrecomputing: {
+      // Bounded in number and budgeted while it waits: a burst of requests on a geometry still
+      // precomputing cannot fill memory.
+      if (e->pending.size() >= impl_->options.max_waiting_per_geometry) {
+        const size_t most = impl_->options.max_waiting_per_geometry;
+        lock.unlock();
+        return done(Error{ErrorCode::kUnavailable, std::to_string(most) + " requests wait for the precomputation of "
+                                                       "geometry " + id.hex() + " already (the most it takes); "
+                                                       "retry once it is ready (GET /geometries/{id}/status)"});
+      }
+      const size_t bytes = request_bytes(request);
+      if (!impl_->budget.try_reserve(bytes)) {
+        lock.unlock();
+        impl_->refused_no_memory.fetch_add(1);
+        return done(no_room(impl_->budget, bytes, "a request waiting for the precomputation"));
+      }
+      MemoryBudget& budget = impl_->budget;
+      e->pending.emplace_back(std::move(request), [&budget, bytes, done = std::move(done)](Result<ResultPtr> r) {
+        budget.release(bytes);  // answered: it waits no more
+        done(std::move(r));
+      });
       return;
+    }
   }
 }
 

@@ -89,6 +89,10 @@ struct ServiceOptions {
   /// count bounds its cost). A PUT that would create one more is refused with kConflict (HTTP
   /// 409) naming the limit; changes of existing holds are always taken.
   size_t max_holds_per_geometry = 256;
+  /// Deformation requests one geometry holds while they wait for its precomputation; one more
+  /// is refused with kUnavailable (HTTP 503, retry once it is ready). Each also counts its
+  /// request against `store_bytes` while it waits.
+  size_t max_waiting_per_geometry = 1024;
   /// Where the service's precomputations and solves run: the host's threads (at most
   /// `precompute_jobs` and `solve_threads` of them at once; a host executor also runs the
   /// precomputations' parallel work unless `precompute.executor` says otherwise). Empty: a pool
