@@ -69,8 +69,10 @@ TEST(ModelEstimateTest, EstimateIsConservativeAndCloseOnTheShippedMeshes) {
     // surfaces by an estimate, which is low where many faces are irregular (the heap shows
     // 1.0-2.7x memory_bytes() on the shipped meshes; spot_quadrangulated 1.09x). Bounded here
     // so that a regression (a large structure not counted at all) shows.
-    EXPECT_GE(counted, 0.3);
-    EXPECT_LE(counted, 1.1);
+    if (heap > 0) {  // (AddressSanitizer's allocator is invisible to mallinfo2: nothing to compare)
+      EXPECT_GE(counted, 0.3);
+      EXPECT_LE(counted, 1.1);
+    }
   }
 }
 
