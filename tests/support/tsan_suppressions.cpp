@@ -1,5 +1,6 @@
-// ThreadSanitizer suppressions of the test executables that run a server (compiled into
-// each: the runtime looks the function up in the executable).
+// ThreadSanitizer suppressions of the test executables that run a server, and of softshell-server
+// in a ThreadSanitizer build (compiled into each: the runtime looks the function up in the
+// executable).
 //
 // Debian's libcpp-httplib.so is not built with ThreadSanitizer. Its function-local statics (e.g.
 // the set of method names in Server::parse_request_line) are initialized by the first connection
