@@ -2,24 +2,19 @@
 // next one on the same directory has, with the same ids and values.
 #include <gtest/gtest.h>
 
-#include <stdlib.h>
-
-#include <filesystem>
-
 #include "http_test_support.h"
 #include "softshell/embedded_session.h"
+#include "temp_dir.h"
 
 namespace softshell {
 namespace {
 
 using namespace test;
-namespace fs = std::filesystem;
 
 TEST(EmbeddedPersistTest, ASessionOnADataDirectoryRestoresTheLastOnesWorld) {
-  std::string dir = (fs::temp_directory_path() / "softshell-embedded-XXXXXX").string();
-  ASSERT_TRUE(mkdtemp(dir.data()));
+  const TempDir dir("softshell-embedded");
   service::ServiceOptions options = test_service_options();
-  options.data_dir = dir;
+  options.data_dir = dir.path;
   GeomId id;
   std::vector<DeformationResult> before;
   {
@@ -40,7 +35,6 @@ TEST(EmbeddedPersistTest, ASessionOnADataDirectoryRestoresTheLastOnesWorld) {
     }
     EXPECT_EQ(session.deform(id, pinned_push(4)).value().res_id, 4u);
   }
-  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -18,6 +18,7 @@
 #include "child_process.h"
 #include "http_test_support.h"
 #include "sse_client.h"
+#include "temp_dir.h"
 
 namespace softshell {
 namespace {
@@ -215,9 +216,8 @@ TEST(ServerAppTest, BusyPortIsAnError) {
 // --auth-token-file (and SOFTSHELL_AUTH_TOKEN_FILE): a bad file stops the start with the reason;
 // a good one makes every request but /health need the token; a file others can read is warned of.
 TEST(ServerAppTest, AuthTokenFile) {
-  char dir_template[] = "/tmp/softshell_app_auth_XXXXXX";
-  ASSERT_NE(mkdtemp(dir_template), nullptr);
-  const std::string dir = dir_template;
+  const TempDir temp("softshell-app-auth");
+  const std::string& dir = temp.path;
   auto write = [&](const std::string& name, const std::string& text, mode_t mode) {
     const std::string path = dir + "/" + name;
     FILE* f = std::fopen(path.c_str(), "wb");
@@ -269,7 +269,6 @@ TEST(ServerAppTest, AuthTokenFile) {
     // The shared file (0644) is warned of; the private one is not.
     EXPECT_EQ(log.find("chmod 600") != std::string::npos, from_env) << log;
   }
-  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

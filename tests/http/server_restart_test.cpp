@@ -3,10 +3,7 @@
 // restores everything; a damaged store or a directory another server holds is refused.
 #include <gtest/gtest.h>
 
-#include <stdlib.h>
-
 #include <atomic>
-#include <filesystem>
 #include <fstream>
 #include <map>
 #include <mutex>
@@ -14,25 +11,12 @@
 
 #include "child_process.h"
 #include "http_test_support.h"
+#include "temp_dir.h"
 
 namespace softshell {
 namespace {
 
 using namespace test;
-namespace fs = std::filesystem;
-
-struct TempDir {
-  TempDir() {
-    std::string pattern = (fs::temp_directory_path() / "softshell-restart-XXXXXX").string();
-    if (!mkdtemp(pattern.data())) throw std::runtime_error("mkdtemp failed");
-    path = pattern;
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-  std::string path;
-};
 
 // A server on `dir`; its port once it listens (0 if it did not start).
 struct Server {
@@ -84,7 +68,7 @@ std::vector<uint32_t> ids_of(int port, const std::string& geom) {
 }
 
 TEST(ServerRestartTest, KillDuringPostsLosesNothingAnswered) {
-  TempDir dir;
+  TempDir dir("softshell-restart");
   std::optional<Server> server(std::in_place, dir.path);
   ASSERT_GT(server->port, 0) << server->child.drain_stderr();
   const int port = server->port;
@@ -177,7 +161,7 @@ TEST(ServerRestartTest, KillDuringPostsLosesNothingAnswered) {
 }
 
 TEST(ServerRestartTest, CleanRestartRestoresEverything) {
-  TempDir dir;
+  TempDir dir("softshell-restart");
   std::string geom;
   std::vector<Seen> before;
   {
@@ -211,7 +195,7 @@ TEST(ServerRestartTest, CleanRestartRestoresEverything) {
 }
 
 TEST(ServerRestartTest, ADamagedStoreIsRefusedWithAClearMessage) {
-  TempDir dir;
+  TempDir dir("softshell-restart");
   std::ofstream(dir.path + "/softshell.db") << std::string(4096, 'x');
   Server server(dir.path);
   EXPECT_EQ(server.port, 0);

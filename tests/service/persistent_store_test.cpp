@@ -13,6 +13,7 @@
 #include <fstream>
 
 #include "server_test_support.h"
+#include "temp_dir.h"
 #include "softshell/content_id.h"
 #include "softshell/service/service.h"
 #include "softshell/wire.h"
@@ -27,20 +28,10 @@ using test::exact_material;
 using test::pinned_push;
 namespace fs = std::filesystem;
 
-// A fresh directory, removed at the end.
-struct TempDir {
-  TempDir() {
-    std::string pattern = (fs::temp_directory_path() / "softshell-store-XXXXXX").string();
-    if (!mkdtemp(pattern.data())) throw std::runtime_error("mkdtemp failed");
-    path = pattern;
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-  std::string db() const { return (fs::path(path) / "softshell.db").string(); }
-  std::string path;
-};
+using test::TempDir;
+
+// The store's database file in `dir`.
+std::string db_of(const TempDir& dir) { return (fs::path(dir.path) / "softshell.db").string(); }
 
 Geometry grid_geometry(std::string ns = "") {
   ControlMesh mesh = exact_grid();
@@ -136,7 +127,7 @@ std::unique_ptr<PersistentStore> open_ok(const std::string& dir) {
 }
 
 TEST(PersistentStoreTest, RestoresGeometriesAndResultsFieldByField) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   const Geometry a = grid_geometry("team a"), b = grid_geometry("team b");
   const int nv = a.mesh.num_vertices();
   std::vector<StoredResult> saved;
@@ -170,7 +161,7 @@ TEST(PersistentStoreTest, RestoresGeometriesAndResultsFieldByField) {
 }
 
 TEST(PersistentStoreTest, DeleteAndDropKeepIdsGoingForward) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   const Geometry a = grid_geometry("a"), b = grid_geometry("b");
   const int nv = a.mesh.num_vertices();
   {
@@ -212,7 +203,7 @@ TEST(PersistentStoreTest, DeleteAndDropKeepIdsGoingForward) {
 }
 
 TEST(PersistentStoreTest, ADirectoryIsHeldByOneStoreAtATime) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   auto first = open_ok(dir.path);
   auto second = PersistentStore::open(dir.path);
   ASSERT_FALSE(second);
@@ -225,7 +216,7 @@ TEST(PersistentStoreTest, ADirectoryIsHeldByOneStoreAtATime) {
 }
 
 TEST(PersistentStoreTest, CreatesAMissingDirectoryAndRefusesAFile) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   const std::string nested = dir.path + "/a/b";
   EXPECT_TRUE(open_ok(nested));
   std::ofstream(dir.path + "/file") << "x";
@@ -244,19 +235,19 @@ void expect_refused(const TempDir& dir, const std::string& says) {
   }
   EXPECT_EQ(refused.error().code, ErrorCode::kInvalidArgument) << refused.error().message;
   EXPECT_NE(refused.error().message.find(says), std::string::npos) << refused.error().message;
-  EXPECT_NE(refused.error().message.find(dir.db()), std::string::npos) << "names the file";
+  EXPECT_NE(refused.error().message.find(db_of(dir)), std::string::npos) << "names the file";
 }
 
 TEST(PersistentStoreTest, RefusesAFileThatIsNotADatabase) {
-  TempDir dir;
-  std::ofstream(dir.db()) << std::string(8192, 'x');
+  TempDir dir("softshell-store");
+  std::ofstream(db_of(dir)) << std::string(8192, 'x');
   expect_refused(dir, "not a softshell store");
 }
 
 TEST(PersistentStoreTest, RefusesAnotherApplicationsDatabase) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   sqlite3* db = nullptr;
-  ASSERT_EQ(sqlite3_open(dir.db().c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_open(db_of(dir).c_str(), &db), SQLITE_OK);
   ASSERT_EQ(sqlite3_exec(db, "CREATE TABLE notes(text TEXT); INSERT INTO notes VALUES('hi');", nullptr, nullptr, nullptr),
             SQLITE_OK);
   sqlite3_close(db);
@@ -264,10 +255,10 @@ TEST(PersistentStoreTest, RefusesAnotherApplicationsDatabase) {
 }
 
 TEST(PersistentStoreTest, RefusesANewerOrUnknownSchema) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   open_ok(dir.path).reset();
   sqlite3* db = nullptr;
-  ASSERT_EQ(sqlite3_open(dir.db().c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_open(db_of(dir).c_str(), &db), SQLITE_OK);
   ASSERT_EQ(sqlite3_exec(db, "UPDATE softshell_meta SET value = '2' WHERE key = 'schema_version'", nullptr, nullptr,
                          nullptr),
             SQLITE_OK);
@@ -282,7 +273,7 @@ TEST(PersistentStoreTest, RefusesANewerOrUnknownSchema) {
 // Damage at every part of a store file: the open or the load is refused with a message, or (damage
 // in slack space) everything loads exactly as saved; never a different result, never a crash.
 TEST(PersistentStoreTest, RefusesADamagedFileWherever) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   const Geometry a = grid_geometry();
   std::vector<StoredResult> saved;
   {
@@ -293,10 +284,10 @@ TEST(PersistentStoreTest, RefusesADamagedFileWherever) {
       ASSERT_TRUE(store->save_result(id_of(a), saved.back()));
     }
   }  // closed: the WAL is checkpointed into the database
-  ASSERT_FALSE(fs::exists(dir.db() + "-wal"));
-  std::string original(static_cast<size_t>(fs::file_size(dir.db())), '\0');
+  ASSERT_FALSE(fs::exists(db_of(dir) + "-wal"));
+  std::string original(static_cast<size_t>(fs::file_size(db_of(dir))), '\0');
   {
-    std::ifstream in(dir.db(), std::ios::binary);
+    std::ifstream in(db_of(dir), std::ios::binary);
     in.read(original.data(), static_cast<std::streamsize>(original.size()));
   }
   ASSERT_GT(original.size(), 8192u);
@@ -304,7 +295,7 @@ TEST(PersistentStoreTest, RefusesADamagedFileWherever) {
   for (size_t at = 0; at < original.size(); at += 4096 / 4 + 13) {
     std::string damaged = original;
     for (size_t k = at; k < std::min(damaged.size(), at + 64); ++k) damaged[k] = static_cast<char>(damaged[k] ^ 0x5a);
-    std::ofstream(dir.db(), std::ios::binary | std::ios::trunc) << damaged;
+    std::ofstream(db_of(dir), std::ios::binary | std::ios::trunc) << damaged;
     ++places;
     auto store = PersistentStore::open(dir.path);
     if (!store) {
@@ -314,7 +305,7 @@ TEST(PersistentStoreTest, RefusesADamagedFileWherever) {
     }
     auto loaded = (*store)->load();
     if (!loaded) {
-      EXPECT_NE(loaded.error().message.find(dir.db()), std::string::npos) << loaded.error().message;
+      EXPECT_NE(loaded.error().message.find(db_of(dir)), std::string::npos) << loaded.error().message;
       ++refused;
       continue;
     }
@@ -330,7 +321,7 @@ TEST(PersistentStoreTest, RefusesADamagedFileWherever) {
 // What a write costs (printed, not asserted: the machine is shared): results the size of
 // spot_quadrangulated's (2,930 control points, about 70 KB each).
 TEST(PersistentStoreTest, WriteCostPerResult) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   Geometry g{test::make_grid(53, 54), exact_material(), ""};  // 2,970 control points
   const GeomId id = id_of(g);
   auto store = open_ok(dir.path);
@@ -361,7 +352,7 @@ ServiceOptions on(const TempDir& dir) {
 }
 
 TEST(PersistentServiceTest, RestoresGeometriesAndHistoriesAndContinuesIds) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   GeomId id, other;
   std::vector<std::string> bodies;
   {
@@ -403,7 +394,7 @@ TEST(PersistentServiceTest, RestoresGeometriesAndHistoriesAndContinuesIds) {
 // Retention and delete reach the data directory: results retention dropped stay dropped (410)
 // after a restart and the kept ones come back; a deleted geometry does not come back.
 TEST(PersistentServiceTest, RetentionAndDeletesSurviveARestart) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   ServiceOptions o = on(dir);
   o.retention.keep_results = 3;
   GeomId kept, deleted;
@@ -431,7 +422,7 @@ TEST(PersistentServiceTest, RetentionAndDeletesSurviveARestart) {
 }
 
 TEST(PersistentServiceTest, RefusesToStartWhenTheStoreDoesNotFitTheBudget) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   {
     Service s(on(dir));
     const GeomId id = s.upload(exact_grid(8), exact_material()).value().id;
@@ -453,7 +444,7 @@ TEST(PersistentServiceTest, RefusesToStartWhenTheStoreDoesNotFitTheBudget) {
 // A write that fails (here: the file size limit, as a full disk would) answers 507 naming the
 // data directory, keeps nothing and uses up no id; once the disk has room again ids continue.
 TEST(PersistentServiceTest, AFailedWriteIsA507AndUsesUpNoId) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   Service s(on(dir));
   const GeomId id = s.upload(exact_grid(), exact_material()).value().id;
   ASSERT_TRUE(s.deform(id, pinned_push(1)).get());
@@ -463,7 +454,7 @@ TEST(PersistentServiceTest, AFailedWriteIsA507AndUsesUpNoId) {
   ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &saved), 0);
   const auto old_handler = signal(SIGXFSZ, SIG_IGN);  // write() fails with EFBIG instead
   rlimit full = saved;
-  full.rlim_cur = static_cast<rlim_t>(fs::file_size(dir.db() + "-wal"));
+  full.rlim_cur = static_cast<rlim_t>(fs::file_size(db_of(dir) + "-wal"));
   ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &full), 0);
   auto refused = s.deform(id, pinned_push(3)).get();
   ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &saved), 0);
@@ -481,7 +472,7 @@ TEST(PersistentServiceTest, AFailedWriteIsA507AndUsesUpNoId) {
 }
 
 TEST(PersistentServiceTest, WithoutADataDirectoryNothingIsWritten) {
-  TempDir dir;
+  TempDir dir("softshell-store");
   {
     ServiceOptions o = on(dir);
     o.data_dir.clear();
