@@ -42,7 +42,14 @@ TEST(HttpApiTest, HealthAndMetrics) {
   EXPECT_EQ(unrouted.status, 404);
   EXPECT_EQ(unrouted.server, std::string("softshell/") + SOFTSHELL_VERSION_STRING);
   upload_ready(server);
+  // A request is counted once its answer is written, so the upload's own connection may count it
+  // a moment after the upload's answer arrived here: wait (boundedly) until it has.
+  const std::string upload_counted = "softshell_http_requests_total{endpoint=\"POST /geometries\"";
   Reply m = get(*c, "/metrics");
+  for (int i = 0; i < 500 && m.body.find(upload_counted) == std::string::npos; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    m = get(*c, "/metrics");
+  }
   EXPECT_EQ(m.status, 200);
   EXPECT_EQ(m.content_type.rfind("text/plain", 0), 0u);
   for (const char* family :
