@@ -17,7 +17,11 @@
 // grab in one request from rest.
 //
 // Usage: bench_engine [warm solves per mesh = 50] [largest scaling-curve DOFs = 100000, 0 = none]
-//                     [supports: only the support-cost table | nonlinear drag steps = 20, 0 = none]
+//                     [supports: only the support-cost table | nonlinear [steps = 20]: only the nonlinear
+//                      drag | nonlinear drag steps = 20, 0 = none]
+// SOFTSHELL_BENCH_STEPS=1 prints each drag step's statistics; SOFTSHELL_BENCH_EXACT_DIRECTIONS=1 solves
+// the Newton directions on the exact tangent (NonlinearOptions::approximate_directions = false);
+// SOFTSHELL_BENCH_MESH=NAME drags only that mesh.
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
@@ -204,7 +208,9 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   }
   const Vec3 direction = (high - low).x() < (high - low).z() ? Vec3(1, 0, 0) : Vec3(0, 0, 1);
   auto cache = std::make_shared<engine::FactorCache>();
-  engine::NonlinearSolver solver(*model, cache);
+  engine::NonlinearOptions options;
+  options.approximate_directions = std::getenv("SOFTSHELL_BENCH_EXACT_DIRECTIONS") == nullptr;
+  engine::NonlinearSolver solver(*model, cache, options);
   DeformationRequest request;
   request.vertex_constraints = bottom_supports(mesh, (*model)->component_of());
   request.limit_constraints.push_back({grab, Vec3::Zero(), {}, {}});
@@ -231,6 +237,11 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
     }
     times.push_back(ms);
     const engine::NonlinearStats& s = step->stats;
+    if (std::getenv("SOFTSHELL_BENCH_STEPS")) {
+      std::printf("  step %d: %.1f ms, %d Newton (%d approximate, %d evaluations), %d Krylov, %d factors; forces %.1f ms, "
+                  "Krylov %.1f ms, tangents %.1f ms\n", k, ms, s.iterations, s.approximate_iterations, s.evaluations,
+                  s.krylov_iterations, s.factorizations, s.evaluate_ms, s.krylov_ms, s.tangent_ms);
+    }
     result.iterations += s.iterations;
     result.krylov += s.krylov_iterations;
     result.factorizations += s.factorizations;
@@ -353,7 +364,9 @@ int main(int argc, char** argv) {
   const int warm_solves = argc > 1 ? std::max(1, std::atoi(argv[1])) : 50;
   const int max_scaling_dofs = argc > 2 ? std::atoi(argv[2]) : 100'000;
   const bool supports_only = argc > 3 && std::string(argv[3]) == "supports";
-  const int drag_steps = supports_only ? 0 : argc > 3 ? std::atoi(argv[3]) : 20;
+  const bool nonlinear_only = argc > 3 && std::string(argv[3]) == "nonlinear";
+  const int drag_steps = supports_only ? 0 : nonlinear_only ? (argc > 4 ? std::atoi(argv[4]) : 20)
+                                                            : argc > 3 ? std::atoi(argv[3]) : 20;
   std::printf("softshell engine benchmark on %s\n", bench::machine().c_str());
   std::printf("E = 6.9e10 Pa, nu = 0.32, t = 2 mm, mesh scaled to a 1 m diagonal, lowest 5%% of the control "
               "points (per part, at least 4) fixed; warm solve = a new random limit constraint on the cached factor (%d per mesh)\n",
@@ -365,7 +378,7 @@ int main(int argc, char** argv) {
   std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n");
   std::string skipped;
   for (const std::string& name : test::asset_mesh_names()) {
-    if (supports_only) break;
+    if (supports_only || nonlinear_only) break;
     const ControlMesh mesh = test::load_asset_mesh(name);
     const Measurement m = measure(mesh, warm_solves);
     if (!m.error.empty()) {
@@ -389,7 +402,9 @@ int main(int argc, char** argv) {
                 "factors per step | time in forces / Krylov / tangents | worst residual | one request from rest | linear "
                 "model off by |\n");
     std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+    const char* only = std::getenv("SOFTSHELL_BENCH_MESH");
     for (const char* name : {"catmark_righthanded.obj", "spot_quadrangulated.obj"}) {
+      if (only && std::string(only) != name) continue;
       const DragMeasurement d = measure_drag(test::load_asset_mesh(name), drag_steps);
       if (!d.error.empty()) {
         std::printf("| %s | %d | %d | %s |\n", name, d.dofs, d.points, d.error.c_str());
@@ -405,6 +420,7 @@ int main(int argc, char** argv) {
     }
   }
 
+  if (nonlinear_only) return 0;
   std::printf("\nSupports + a new random grab per request (same setup; floor = sdk floor_contact's limit points; "
               "both supports solved for each grab, interleaved; %d warm solves)\n\n", warm_solves);
   std::printf("| mesh | supports | rows | first solve | second solve | warm p50 | p95 | warm p50 / vertex supports |\n");

@@ -209,6 +209,11 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
       }
     }
     shell->build_rule(cells, jacobian_gauss_points, threads, shell->coarse_);
+    ShellState rest;
+    if (!shell->evaluate_rule(shell->coarse_, Eigen::VectorXd::Zero(m.num_dofs()), rest, false)) {
+      fail(ErrorCode::kUnprocessable, "nonlinear shell: the limit surface is degenerate at a coarse quadrature point");
+    }
+    shell->assemble_rule(shell->coarse_, rest, 0.0, shell->coarse_rest_);
   }
   return shell;
 }
@@ -232,6 +237,7 @@ Eigen::MatrixXd NonlinearShell::element_basis(const Rule& rule, const Element& e
 
 size_t NonlinearShell::memory_bytes() const {
   size_t bytes = sizeof(*this);
+  bytes += static_cast<size_t>(coarse_rest_.nonZeros()) * (sizeof(double) + sizeof(int));
   for (const Rule* rule : {&fine_, &coarse_}) {
     bytes += rule->reference.size() * sizeof(double);
     for (const Element& e : rule->elements) {
@@ -299,8 +305,26 @@ bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, S
 
 void NonlinearShell::tangent_product(const ShellState& state, double pressure, const Eigen::MatrixXd& v,
                                      Eigen::MatrixXd& out) const {
+  tangent_product_rule(fine_, state, pressure, v, out);
+}
+
+bool NonlinearShell::evaluate_coarse(const Eigen::VectorXd& u, ShellState& coarse) const {
+  if (!has_jacobian_rule()) fail(ErrorCode::kInternal, "nonlinear shell: no coarse rule");
+  return evaluate_rule(coarse_, u, coarse, false);
+}
+
+void NonlinearShell::approximate_tangent_product(const ShellState& coarse, double pressure, const Eigen::VectorXd& v,
+                                                 Eigen::VectorXd& out) const {
+  Eigen::MatrixXd remainder;
+  tangent_product_rule(coarse_, coarse, pressure, v, remainder);
+  out = model_->stiffness() * v;
+  out += remainder.col(0);
+  out -= coarse_rest_ * v;
+}
+
+void NonlinearShell::tangent_product_rule(const Rule& rule, const ShellState& state, double pressure,
+                                          const Eigen::MatrixXd& v, Eigen::MatrixXd& out) const {
   const int32_t ndof = num_dofs();
-  const Rule& rule = fine_;
   if (!state.valid || v.rows() != ndof || state.points.size() != kState * rule.points) {
     fail(ErrorCode::kInternal, "nonlinear shell: tangent product of a bad state");
   }

@@ -163,6 +163,10 @@ class Run {
   double refresh_ms_ = 0.0, krylov_ms_ = 0.0;  // cost of the last refresh, of one Krylov iteration
   int last_krylov_ = 0;
   double last_residual_ = 0.0;
+  // Newton directions on the approximate tangent (NonlinearShell::approximate_tangent_product)
+  // until Newton on it is slow; then on the exact one for the rest of the solve.
+  bool approximate_ = false;
+  ShellState coarse_;  // the state on the coarse rule, at state_'s displacement (when approximate_)
   NonlinearStats stats_;
 };
 
@@ -195,6 +199,7 @@ Run::Run(std::shared_ptr<const ShellModel> model, const NonlinearShell& shell, F
   // E t h sqrt(3n) for a rigid half turn), so 1e-6 leaves a margin of 30 over the tolerance.
   const Material& mat = m.material();
   const double h = std::sqrt(m.area() / std::max(1, m.mesh().num_faces()));
+  approximate_ = options.approximate_directions && shell.has_jacobian_rule();
   force_floor_ = 1e-6 * mat.youngs_modulus * mat.thickness * h * std::sqrt(static_cast<double>(ndof));
 }
 
@@ -218,9 +223,14 @@ bool Run::rows_met(const Eigen::VectorXd& g, const Eigen::VectorXd& u) const {
 }
 
 Eigen::VectorXd Run::tangent_times(const Eigen::VectorXd& v, double lambda) const {
-  Eigen::MatrixXd out;
-  shell_.tangent_product(state_, lambda * pressure_, v, out);
-  Eigen::VectorXd jv = out.col(0);
+  Eigen::VectorXd jv;
+  if (approximate_) {
+    shell_.approximate_tangent_product(coarse_, lambda * pressure_, v, jv);
+  } else {
+    Eigen::MatrixXd out;
+    shell_.tangent_product(state_, lambda * pressure_, v, out);
+    jv = out.col(0);
+  }
   for (int32_t dof : problem_.fixed) jv[dof] = 0.0;
   return jv;
 }
@@ -323,6 +333,10 @@ void Run::refresh_tangent() {
 // relative accuracy eta. If GMRES is slow, the preconditioner is refreshed at this state first.
 bool Run::newton_direction(const Eigen::VectorXd& r, const Eigen::VectorXd& g, double lambda, double eta,
                            Eigen::VectorXd& p) {
+  if (approximate_ && (coarse_.displacement.size() != u_.size() || coarse_.displacement != state_.displacement)) {
+    if (!shell_.evaluate_coarse(state_.displacement, coarse_)) approximate_ = false;
+  }
+  if (approximate_) ++stats_.approximate_iterations;
   for (int attempt = 0; attempt < 2; ++attempt) {
     // Refresh when the last solve's Krylov iterations cost more than a new factor would.
     const double refresh_cost = refresh_ms_ > 0.0 ? refresh_ms_ : 2.0 * krylov_ms_;  // a guess until measured
@@ -425,7 +439,13 @@ bool Run::solve_step(double lambda, double tolerance) {
     const double res = last_residual_;
     // Thin shells need accurate Newton directions (measured: a flat plate turned rigidly needs
     // eta <= 1e-6, curved shells 1e-3): start at 1e-3 and tighten when Newton is slow.
-    if (it > 0 && res > 0.2 * previous) eta_cap = std::max(1e-8, 0.01 * eta_cap);
+    if (it > 0 && res > 0.2 * previous) {
+      if (approximate_) {
+        approximate_ = false;  // the coarse rule's remainder is too far off here: exact directions
+      } else {
+        eta_cap = std::max(1e-8, 0.01 * eta_cap);
+      }
+    }
     const double eta = std::clamp(std::max(std::min(res, res / previous), 0.3 * tolerance / res), 1e-9, eta_cap);
     previous = res;
     Eigen::VectorXd p;

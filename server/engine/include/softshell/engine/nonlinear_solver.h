@@ -38,11 +38,17 @@ struct NonlinearOptions {
   std::shared_ptr<Executor> executor;
   /// At most this many of the executor's threads work on one solve (0 = all of them).
   int threads = 0;
-  /// Gauss points per direction on each (sub-)face of the rule the preconditioner's tangent is
-  /// integrated with (0: the model's own rule). The Newton directions always use the exact
-  /// tangent and the residual the model's rule; a coarser rule only makes refreshing the
-  /// preconditioner cheaper. Range 0..10.
+  /// Gauss points per direction on each (sub-)face of the coarse rule (0: none, the model's own
+  /// rule everywhere). The preconditioner's tangent is integrated with it, and so is the
+  /// nonlinear remainder of the tangent the Newton directions solve while Newton on it converges
+  /// fast (`approximate_directions`). The residual, and so the answer, always uses the model's
+  /// rule. Range 0..10.
   int tangent_gauss_points = 4;
+  /// Newton directions on K plus the coarse rule's nonlinear remainder of the tangent (a tenth of
+  /// the cost per product on meshes with many extraordinary vertices) until an iteration gains
+  /// less than a factor of 5; from then on, and with false, on the exact tangent. The answer is
+  /// the same either way (the same residual and tolerance).
+  bool approximate_directions = true;
   /// If set and it becomes true, a running solve stops at its next iteration with kCancelled
   /// (a server shutting down; the flag must outlive the solver).
   const std::atomic<bool>* cancel = nullptr;
@@ -51,6 +57,7 @@ struct NonlinearOptions {
 /// What a nonlinear solve did.
 struct NonlinearStats {
   int32_t iterations = 0;         ///< nonlinear iterations (directions computed), all load steps
+  int32_t approximate_iterations = 0;  ///< of which with directions on the approximate tangent
   int32_t evaluations = 0;        ///< evaluations of the internal forces (iterations + line searches)
   int32_t load_steps = 0;         ///< 1 when the request converged in one step
   int32_t krylov_iterations = 0;  ///< GMRES iterations (each one tangent product and one solve)
