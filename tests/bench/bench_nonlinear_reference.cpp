@@ -226,12 +226,14 @@ void small_loads() {
         r.surface_forces.push_back({tip, Vec3(0.0, 0.0, -load)});
         return r;
       },
-      {1.0, 0.1, 0.01}, [&](const ShellModel& m, const Eigen::VectorXd& u) { return -limit_displacement(m, u, tip).z(); });
-  // The open hemisphere (16 x 16 quarter): P in the linear range, radial displacement at A.
+      {0.1, 0.01, 0.001}, [&](const ShellModel& m, const Eigen::VectorXd& u) { return -limit_displacement(m, u, tip).z(); });
+  // The open hemisphere (16 x 16 quarter): P in the linear range, radial displacement at A. At
+  // P = 2 (the quarter carries 1 at each load point) the linear value is the linear benchmark's
+  // (MacNeal and Harder 1985: 0.094).
   const test::OpenHemisphere h = test::make_open_hemisphere(16, 16);
   run(
       "hemisphere 16x16, u_A", h.grid.mesh, test::OpenHemisphere::material(),
-      [&](double load) { return h.request(load); }, {4.0, 0.4, 0.04},
+      [&](double load) { return h.request(load); }, {2.0, 0.2, 0.02},
       [&](const ShellModel& m, const Eigen::VectorXd& u) { return limit_displacement(m, u, h.a()).x(); });
 }
 
