@@ -166,7 +166,8 @@ OpenHemisphere make_open_hemisphere(int nphi, int npsi);
 /// ElmerCSC/elmerfem fem/tests/Shell_OpenHemisphere_High_Order/runhemisphere.m ("Reference
 /// results from the paper Sze KY, Liu XH, Lo SH ..."), which plots the second column against the
 /// displacement of its outward-loaded point and the third against minus that of its inward-loaded
-/// one, with P = 400 P / P_max the force of the whole shell (its quarter model carries half).
+/// one, with P = 400 P / P_max the force of the whole shell (its quarter model carries half, as
+/// in smdogroup/tacs tests/integration_tests/test_shell_hemisphere_nonlinear.py: PMax / 2).
 inline constexpr SzeRow kSzeHemisphere[] = {
     {0.05, 0.855, 0.955, 0}, {0.10, 1.499, 1.840, 0}, {0.15, 1.969, 2.604, 0}, {0.20, 2.321, 3.261, 0},
     {0.25, 2.596, 3.833, 0}, {0.30, 2.819, 4.339, 0}, {0.35, 3.002, 4.790, 0}, {0.40, 3.158, 5.196, 0},
