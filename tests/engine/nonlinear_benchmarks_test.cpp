@@ -131,5 +131,55 @@ TEST(NonlinearBenchmarks, OpenHemisphereFollowsSzeLiuLo) {
   EXPECT_LT(worst(f, 1), 0.25 * worst(c, 1));
 }
 
+// The mirror planes are the full model, not an approximation of it: a curved panel clamped at
+// both ends and loaded symmetrically (a force in the mirror plane, a force off it with an
+// in-plane component, and its mirror image) gives the same large deflection as its half clamped
+// at one end with a mirror plane at mid-span (which carries half the force in the plane).
+TEST(NonlinearBenchmarks, MirrorPlanesGiveTheFullModelsAnswer) {
+  constexpr int kHalf = 6, kAcross = 3;
+  constexpr double kStep = 0.1;
+  auto position = [](int i, int j) {
+    const double x = i * kStep, centre = kHalf * kStep;
+    return Vec3(x, j * kStep, 0.5 * (x - centre) * (x - centre));
+  };
+  const test::GhostGrid full = test::make_ghost_grid(2 * kHalf, kAcross, position);
+  const test::GhostGrid half = test::make_ghost_grid(kHalf, kAcross, position);
+  const Material material{1.0e7, 0.3, 0.01, 0.0};
+  const Vec3 in_plane(0.0, 0.0, -800.0), off_plane(300.0, 100.0, -400.0);
+  auto clamp = [](const test::GhostGrid& g, int i0, DeformationRequest& r) {
+    for (int j = -1; j <= g.nv + 1; ++j) {
+      for (int i = i0; i <= i0 + 2; ++i) r.vertex_constraints.push_back({g.index(i, j), kAxisAll, Vec3::Zero()});
+    }
+  };
+  DeformationRequest full_request, half_request;
+  clamp(full, -1, full_request);
+  clamp(full, 2 * kHalf - 1, full_request);
+  full_request.surface_forces = {{full.at(0.5, 0.5), in_plane},
+                                 {full.at(0.15, 0.3), off_plane},
+                                 {full.at(0.85, 0.3), Vec3(-off_plane.x(), off_plane.y(), off_plane.z())}};
+  clamp(half, -1, half_request);
+  test::add_mirror_planes(half, test::MirrorPlanes{-1, 0, -1, -1}, half_request);
+  half_request.surface_forces = {{half.at(1.0, 0.5), 0.5 * in_plane}, {half.at(0.3, 0.3), off_plane}};
+  auto full_model = ShellModel::build(full.mesh, material).value();
+  auto half_model = ShellModel::build(half.mesh, material).value();
+  auto full_solution = NonlinearSolver(full_model, std::make_shared<FactorCache>()).solve(full_request);
+  auto half_solution = NonlinearSolver(half_model, std::make_shared<FactorCache>()).solve(half_request);
+  ASSERT_TRUE(full_solution.ok()) << full_solution.error().message;
+  ASSERT_TRUE(half_solution.ok()) << half_solution.error().message;
+  double largest = 0.0, worst = 0.0;
+  for (double s : {0.2, 0.6, 1.0}) {
+    for (double t : {0.0, 0.5, 1.0}) {
+      const Vec3 a = limit_displacement(*full_model, full_solution->displacement, full.at(0.5 * s, t));
+      const Vec3 b = limit_displacement(*half_model, half_solution->displacement, half.at(s, t));
+      largest = std::max(largest, a.norm());
+      worst = std::max(worst, (a - b).norm());
+    }
+  }
+  std::printf("mirror plane: largest displacement %.4f (span %.1f), half against full %.1e\n", largest,
+              2 * kHalf * kStep, worst);
+  EXPECT_GT(largest, 5 * material.thickness);  // several thicknesses: the nonlinear terms matter
+  EXPECT_LT(worst, 1e-6 * largest);
+}
+
 }  // namespace
 }  // namespace softshell::engine
