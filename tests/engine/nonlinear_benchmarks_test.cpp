@@ -103,12 +103,12 @@ TEST(NonlinearBenchmarks, PulledOutCylinderFollowsSzeLiuLo) {
   EXPECT_LT(worst(f, 1), 0.5 * worst(c, 1));
 }
 
-// The quarter of the hemisphere, P/2 at each load point. Mesh convergence over the whole curve
-// (bench_nonlinear_reference): u_A -17% (8x8; membrane locking at R/t = 250), -2.9% (16x16),
-// -0.16% (32x32); -u_B -21%, -3.6%, -0.8%: the 32x32 mesh agrees with the reference (a 16x16
-// mesh of shear-deformable elements) to its own accuracy. Tolerance for 16x16: 4%. (Were the
-// reference's columns paired with the wrong points, the pulled one and the pushed one, which
-// move 4.07 and 8.18 at Pmax, the differences would be tens of percent.)
+// The quarter of the hemisphere, P/2 at each load point. Mesh convergence, the worst difference
+// over the whole curve (bench_nonlinear_reference): u_A -17% (8x8; membrane locking at
+// R/t = 250), -3.3% (16x16), -0.16% (32x32); -u_B -21%, -3.9%, -0.8%: the 32x32 mesh agrees with
+// the reference (a 16x16 mesh of shear-deformable elements) to its own accuracy. Tolerance for
+// 16x16: 4.5%. (Were the reference's columns paired with the wrong points, the pulled one and the
+// pushed one, which move 4.07 and 8.18 at Pmax, the differences would be tens of percent.)
 TEST(NonlinearBenchmarks, OpenHemisphereFollowsSzeLiuLo) {
   const std::vector<test::SzeRow> rows =
       rows_at(test::kSzeHemisphere, std::size(test::kSzeHemisphere), {0.1, 0.5, 1.0});
@@ -125,8 +125,8 @@ TEST(NonlinearBenchmarks, OpenHemisphereFollowsSzeLiuLo) {
   const Differences f = follow("hemisphere", fine, rows, 2, measure(fine));
   ASSERT_EQ(f.size(), rows.size());
   ASSERT_EQ(c.size(), rows.size());
-  EXPECT_LT(worst(f, 0), 0.04);
-  EXPECT_LT(worst(f, 1), 0.04);
+  EXPECT_LT(worst(f, 0), 0.045);
+  EXPECT_LT(worst(f, 1), 0.045);
   EXPECT_LT(worst(f, 0), 0.25 * worst(c, 0));
   EXPECT_LT(worst(f, 1), 0.25 * worst(c, 1));
 }
