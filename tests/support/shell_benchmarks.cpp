@@ -119,6 +119,109 @@ std::vector<VertexConstraint> ScordelisLo::supports() const {
   return out;
 }
 
+GhostGrid make_ghost_grid(int nu, int nv, const std::function<Vec3(int, int)>& position) {
+  GhostGrid g;
+  g.nu = nu;
+  g.nv = nv;
+  std::vector<Vec3> positions;
+  for (int j = -1; j <= nv + 1; ++j) {
+    for (int i = -1; i <= nu + 1; ++i) positions.push_back(position(i, j));
+  }
+  std::vector<std::vector<int32_t>> quads;
+  for (int j = -1; j <= nv; ++j) {
+    for (int i = -1; i <= nu; ++i) quads.push_back({g.index(i, j), g.index(i + 1, j), g.index(i + 1, j + 1), g.index(i, j + 1)});
+  }
+  g.mesh = ControlMesh(std::move(positions), quads);
+  g.mesh.set_boundary(BoundaryMode::kNone);
+  return g;
+}
+
+SurfacePoint GhostGrid::at(double s, double t) const {
+  const int fi = std::min(static_cast<int>(s * nu), nu - 1), fj = std::min(static_cast<int>(t * nv), nv - 1);
+  return SurfacePoint{(fj + 1) * (nu + 2) + fi + 1, 0, s * nu - fi, t * nv - fj};
+}
+
+void add_mirror_planes(const GhostGrid& grid, const MirrorPlanes& planes, DeformationRequest& request) {
+  // The partner of a ghost index across a mirror plane (itself if the edge is free or the index
+  // is not a ghost), and the reflection that maps the partner's displacement onto the ghost's.
+  auto partner = [](int k, int n, int low_axis, int high_axis, Vec3& reflection) {
+    if (k == -1 && low_axis >= 0) {
+      reflection[low_axis] = -reflection[low_axis];
+      return 1;
+    }
+    if (k == n + 1 && high_axis >= 0) {
+      reflection[high_axis] = -reflection[high_axis];
+      return n - 1;
+    }
+    return k;
+  };
+  for (int j = -1; j <= grid.nv + 1; ++j) {
+    for (int i = -1; i <= grid.nu + 1; ++i) {
+      Vec3 reflection = Vec3::Ones();
+      const int pi = partner(i, grid.nu, planes.i_min, planes.i_max, reflection);
+      const int pj = partner(j, grid.nv, planes.j_min, planes.j_max, reflection);
+      if (pi != i || pj != j) {  // u(ghost) = M u(partner); the partner is never tied itself
+        request.lagrange_constraints.push_back(
+            {{grid.index(i, j), grid.index(pi, pj)}, {Vec3::Ones(), -reflection}, Vec3::Zero()});
+        continue;
+      }
+      uint32_t mask = 0;  // in a plane: no motion along its normal
+      if (i == 0 && planes.i_min >= 0) mask |= 1u << planes.i_min;
+      if (i == grid.nu && planes.i_max >= 0) mask |= 1u << planes.i_max;
+      if (j == 0 && planes.j_min >= 0) mask |= 1u << planes.j_min;
+      if (j == grid.nv && planes.j_max >= 0) mask |= 1u << planes.j_max;
+      if (mask != 0) request.vertex_constraints.push_back({grid.index(i, j), mask, Vec3::Zero()});
+    }
+  }
+}
+
+namespace {
+constexpr double kPiValue = 3.14159265358979323846;
+// A ring of control points at radius r c(d) has its limit points at radius r: c = 6 / (4 + 2 cos d).
+double ring_scale(double step) { return 6.0 / (4.0 + 2.0 * std::cos(step)); }
+}  // namespace
+
+PulloutCylinder make_pullout_cylinder(int nt, int nl) {
+  PulloutCylinder c;
+  const double dtheta = 0.5 * kPiValue / nt, dy = 0.5 * PulloutCylinder::kLength / nl;
+  const double r = PulloutCylinder::kRadius * ring_scale(dtheta);
+  c.grid = make_ghost_grid(nt, nl, [&](int i, int j) {
+    return Vec3(r * std::cos(i * dtheta), j * dy, r * std::sin(i * dtheta));
+  });
+  return c;
+}
+
+DeformationRequest PulloutCylinder::request(double load) const {
+  DeformationRequest request;
+  add_mirror_planes(grid, MirrorPlanes{2, 0, -1, 1}, request);
+  request.surface_forces.push_back({a(), Vec3(0.0, 0.0, load / 4.0)});
+  return request;
+}
+
+OpenHemisphere make_open_hemisphere(int nphi, int npsi) {
+  OpenHemisphere h;
+  const double dphi = 0.5 * kPiValue / nphi;
+  const double equator = 0.5 * kPiValue, hole = OpenHemisphere::kHoleDeg * kPiValue / 180.0;
+  const double dpsi = (equator - hole) / npsi;
+  // Tensor-product weights: the limit of vertex (i, j) scales x, y by both ring factors, z by one.
+  const double sphi = ring_scale(dphi), spsi = ring_scale(dpsi);
+  h.grid = make_ghost_grid(nphi, npsi, [&](int i, int j) {
+    const double phi = i * dphi, psi = equator - j * dpsi;  // colatitude
+    const double rho = OpenHemisphere::kRadius * std::sin(psi) * sphi * spsi;
+    return Vec3(rho * std::cos(phi), rho * std::sin(phi), OpenHemisphere::kRadius * std::cos(psi) * spsi);
+  });
+  return h;
+}
+
+DeformationRequest OpenHemisphere::request(double load) const {
+  DeformationRequest request;
+  add_mirror_planes(grid, MirrorPlanes{1, 0, -1, -1}, request);
+  request.vertex_constraints.push_back({grid.index(1, grid.nv), kAxisZ, Vec3::Zero()});
+  request.surface_forces.push_back({a(), Vec3(load / 2.0, 0.0, 0.0)});
+  request.surface_forces.push_back({b(), Vec3(0.0, -load / 2.0, 0.0)});
+  return request;
+}
+
 ControlMesh fan_plate(int valence, int k, int sectors) {
   if (sectors < 0) sectors = valence;
   const bool closed = sectors == valence;
