@@ -221,7 +221,7 @@ namespace Softshell
     {
         /// <summary>libsoftshell_plugin.so / softshell_plugin.dll / libsoftshell_plugin.dylib.</summary>
         public const string Lib = "softshell_plugin";
-        public const uint AbiVersion = 3;
+        public const uint AbiVersion = 4;
         public const int Mask_X = 1, Mask_Y = 2, Mask_Z = 4, Mask_All = 7;
         public const int ForceTransferSubdivide = 0, ForceTransferVirtualWork = 1;
         public const int BoundaryEdgeAndCorner = 0, BoundaryNone = 1;
@@ -418,6 +418,10 @@ namespace Softshell
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_session_upload(IntPtr session, IntPtr mesh, ref Material material, byte[] nameSpace, out GeomId id,
                                                       out int created);
+        /// <summary>Deletes the geometry and everything kept for it; NotFound for an unknown one. An upload of
+        /// the same content later continues its result ids. Blocks for one request.</summary>
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_session_remove_geometry(IntPtr session, ref GeomId id);
         /// <summary>Blocks until solved: for tools and tests; a frame loop uses ss_session_deform_begin.</summary>
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_session_deform(IntPtr session, ref GeomId id, IntPtr request, out uint resId, double[] outXyz,

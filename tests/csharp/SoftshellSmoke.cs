@@ -268,6 +268,26 @@ static class SoftshellSmoke
         Check(releasedId == 4, "releasing stores the rest shape");
         Check(Native.ss_session_release_hold(session, ref id, Native.Utf8("csharp.clamp"), out releasedId) == Status.NotFound,
               "a released hold is gone");
+        // Deleting the geometry: the follower's stream ends, the id is unknown, and the same content
+        // uploaded again continues the result ids (1..4 belonged to the deleted upload).
+        Native.Check(Native.ss_session_remove_geometry(session, ref id));
+        Check(Native.ss_session_geometry_status(remote, ref id, out status, why, why.Length) == Status.NotFound,
+              "a deleted geometry is unknown");
+        Check(Native.ss_session_remove_geometry(remote, ref id) == Status.NotFound && Native.LastError().Contains("no geometry with id"),
+              "deleting it again: not found");
+        for (int frame = 0; frame < 10000 && feedState != Native.FeedFailed; ++frame)
+        {
+            Native.Check(Native.ss_subscription_state(feed, out feedState));
+            if (feedState != Native.FeedFailed) Thread.Sleep(1);
+        }
+        Check(feedState == Native.FeedFailed &&
+              Native.ss_subscription_poll(feed, out followed, out seen, latest, NV, out count) == Status.Gone,
+              "the follower's stream ends with gone");
+        GeomId again;
+        Native.Check(Native.ss_session_upload(remote, plate, ref aluminium, null, out again, out created));
+        Check(created == 1 && again.Equals(id), "uploaded again: a new geometry under the same id");
+        Native.Check(Native.ss_session_deform(remote, ref again, one, out resId, latest, NV, out count));
+        Check(resId == 5, "the ids continue after the deleted upload's (got " + resId + ")");
         Native.ss_subscription_destroy(feed);
         Native.ss_session_destroy(remote);
 
