@@ -188,7 +188,9 @@ namespace Softshell
         public double von_mises_bottom; // Pa, at -t/2
     }
 
-    /// <summary>Options of the in-process server (blittable: the host is a fixed 64-byte buffer).</summary>
+    /// <summary>Options of the in-process server (blittable: the host is a fixed 64-byte buffer, data_dir
+    /// a pointer to UTF-8 the caller owns, e.g. from Marshal.StringToCoTaskMemUTF8 or a pinned Native.Utf8
+    /// array).</summary>
     [StructLayout(LayoutKind.Sequential)]
     public unsafe struct EmbeddedOptions
     {
@@ -198,6 +200,10 @@ namespace Softshell
         public int listen;             // != 0: also serve the HTTP API on http_host:http_port
         public int http_port;          // 0: any free port
         public fixed byte http_host[HostCapacity];
+        public int keep_results;       // results kept per geometry; 0: the default (1000), -1: no count limit
+        public int result_budget_mb;   // MiB of results kept per geometry; 0: no byte limit
+        public IntPtr data_dir;        // NUL-terminated UTF-8 directory of a persistent store (copied in by
+                                       // ss_session_create_embedded; free it after); IntPtr.Zero: memory only
 
         /// <summary>Sets http_host (UTF-8, NUL-terminated, at most 63 bytes).</summary>
         public void SetHttpHost(string host)

@@ -124,7 +124,9 @@ static class SoftshellSmoke
         Check(Marshal.SizeOf(typeof(GrabOptions)) == 8 && Marshal.SizeOf(typeof(FloorOptions)) == 16, "option sizes");
         Check(Marshal.SizeOf(typeof(RemoteOptions)) == 16 + IntPtr.Size && Marshal.OffsetOf(typeof(RemoteOptions), "auth_token").ToInt32() == 16 &&
               Marshal.SizeOf(typeof(GeometryStatus)) == 24, "RemoteOptions/GeometryStatus size");
-        Check(Marshal.SizeOf(typeof(EmbeddedOptions)) == 80 && Marshal.OffsetOf(typeof(EmbeddedOptions), "http_host").ToInt32() == 16,
+        Check(Marshal.SizeOf(typeof(EmbeddedOptions)) == 88 + IntPtr.Size && Marshal.OffsetOf(typeof(EmbeddedOptions), "http_host").ToInt32() == 16 &&
+              Marshal.OffsetOf(typeof(EmbeddedOptions), "keep_results").ToInt32() == 80 &&
+              Marshal.OffsetOf(typeof(EmbeddedOptions), "data_dir").ToInt32() == 88,
               "EmbeddedOptions layout");
 
         Check(Native.ss_abi_version() == Native.AbiVersion, "ABI version " + Native.ss_abi_version());

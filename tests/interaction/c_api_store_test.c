@@ -1,9 +1,14 @@
 /* What a session keeps, through the C ABI from plain C11 on the in-process server
  * (softshell_embedded_c.h): deleting a geometry (ss_session_remove_geometry: its results are gone,
- * the id is unknown, an upload of the same content continues the result ids). */
+ * the id is unknown, an upload of the same content continues the result ids); a persistent
+ * embedded server (ss_embedded_options.data_dir: what was stored is there after the session is
+ * destroyed and created again); result retention (keep_results). */
 
+#define _XOPEN_SOURCE 700 /* mkdtemp */
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "softshell/softshell_c.h"
 #include "softshell/softshell_embedded_c.h"
@@ -74,8 +79,116 @@ static void remove_geometry(void) {
   ss_session_destroy(session);
 }
 
+/* The files a store directory holds (PersistentStore), removed with it. */
+static void remove_store(const char* dir) {
+  static const char* const kFiles[] = {"softshell.db", "softshell.db-wal", "softshell.db-shm", "softshell.lock"};
+  char path[512];
+  for (size_t k = 0; k < sizeof kFiles / sizeof kFiles[0]; ++k) {
+    snprintf(path, sizeof path, "%s/%s", dir, kFiles[k]);
+    remove(path);
+  }
+  CHECK(rmdir(dir) == 0);
+}
+
+/* Create with a data directory, post, destroy, create again: the results are there, bit for bit,
+ * and the ids continue. */
+static void persistent_session(void) {
+  char dir[] = "/tmp/softshell-c-store-XXXXXX";
+  if (mkdtemp(dir) == NULL) {
+    CHECK(!"mkdtemp failed");
+    return;
+  }
+  char data_dir[sizeof dir + 8];
+  snprintf(data_dir, sizeof data_dir, "%s/store", dir); /* created by the server */
+  ss_embedded_options options;
+  ss_embedded_options_default(&options);
+  CHECK(options.data_dir == NULL && options.keep_results == 0 && options.result_budget_mb == 0);
+  options.data_dir = data_dir;
+
+  ss_mesh* mesh = make_grid(N);
+  const ss_material material = {7.0e10, 0.3, 0.01, 2700.0};
+  ss_geom_id id;
+  int32_t created = -1, count = 0, has_new = -1;
+  uint32_t res_id = 0;
+  double before[3 * NV], after[3 * NV];
+  {
+    ss_session* session = NULL;
+    CHECK_OK(ss_session_create_embedded(&options, &session));
+    /* One server per directory. */
+    ss_session* second = NULL;
+    CHECK_STATUS(ss_session_create_embedded(&options, &second), SS_UNAVAILABLE);
+    CHECK(second == NULL && strstr(ss_last_error_message(), "in use by another softshell server") != NULL);
+    CHECK_OK(ss_session_upload(session, mesh, &material, NULL, &id, &created));
+    CHECK(created == 1);
+    CHECK(deform(session, &id, 1.0) == 1);
+    CHECK(deform(session, &id, 2.0) == 2);
+    CHECK_OK(ss_session_latest_result(session, &id, 0, 0, &has_new, &res_id, before, NV, &count));
+    CHECK(has_new == 1 && res_id == 2);
+    ss_session_destroy(session);
+  }
+  ss_session* session = NULL;
+  CHECK_OK(ss_session_create_embedded(&options, &session));
+  ss_geometry_status status;
+  CHECK_OK(ss_session_geometry_status(session, &id, &status, NULL, 0));
+  CHECK(status.num_results == 2 && status.num_vertices == NV);
+  CHECK_OK(ss_session_latest_result(session, &id, 0, 0, &has_new, &res_id, after, NV, &count));
+  CHECK(has_new == 1 && res_id == 2 && count == NV && memcmp(before, after, sizeof before) == 0);
+  CHECK_OK(ss_session_upload(session, mesh, &material, NULL, &id, &created));
+  CHECK(created == 0); /* restored: not new */
+  CHECK(deform(session, &id, 3.0) == 3);
+  ss_session_destroy(session);
+
+  /* A directory that cannot be one: a file. */
+  char file[sizeof dir + 8];
+  snprintf(file, sizeof file, "%s/file", dir);
+  FILE* f = fopen(file, "w");
+  CHECK(f != NULL);
+  if (f) fclose(f);
+  options.data_dir = file;
+  CHECK_STATUS(ss_session_create_embedded(&options, &session), SS_INVALID_ARGUMENT);
+  CHECK(session == NULL && strstr(ss_last_error_message(), "not a directory") != NULL);
+  remove(file);
+
+  ss_mesh_destroy(mesh);
+  remove_store(data_dir);
+  CHECK(rmdir(dir) == 0);
+}
+
+/* keep_results: the newest results stay, older ones are SS_GONE; bad values are refused. */
+static void retention(void) {
+  ss_embedded_options options;
+  ss_embedded_options_default(&options);
+  ss_session* session = NULL;
+  options.keep_results = -2;
+  CHECK_STATUS(ss_session_create_embedded(&options, &session), SS_INVALID_ARGUMENT);
+  options.keep_results = 0;
+  options.result_budget_mb = -1;
+  CHECK_STATUS(ss_session_create_embedded(&options, &session), SS_INVALID_ARGUMENT);
+  options.result_budget_mb = 0;
+  options.keep_results = 2;
+  CHECK_OK(ss_session_create_embedded(&options, &session));
+  ss_mesh* mesh = make_grid(N);
+  const ss_material material = {7.0e10, 0.3, 0.01, 2700.0};
+  ss_geom_id id;
+  int32_t created = -1;
+  CHECK_OK(ss_session_upload(session, mesh, &material, NULL, &id, &created));
+  for (uint32_t k = 1; k <= 3; ++k) CHECK(deform(session, &id, (double)k) == k);
+  ss_geometry_status status;
+  CHECK_OK(ss_session_geometry_status(session, &id, &status, NULL, 0));
+  CHECK(status.num_results == 2);
+  ss_stress_field* field = NULL;
+  CHECK_STATUS(ss_session_stresses(session, &id, 1, 1, NULL, 0, 0.0, &field), SS_GONE);
+  CHECK(strstr(ss_last_error_message(), "no longer kept") != NULL);
+  CHECK_OK(ss_session_stresses(session, &id, 2, 1, NULL, 0, 0.0, &field));
+  ss_stress_field_destroy(field);
+  ss_mesh_destroy(mesh);
+  ss_session_destroy(session);
+}
+
 int main(void) {
   remove_geometry();
+  persistent_session();
+  retention();
   printf("c_api_store_test: %d checks, %d failures\n", g_checks, g_failures);
   return g_failures == 0 ? 0 : 1;
 }

@@ -75,7 +75,8 @@ SS_API uint32_t ss_version_number(void);
 /** The ABI version this header describes; compare with `ss_abi_version()` at load time and refuse
  *  a library with another one (struct layouts or signatures differ). 2: generation-checked
  *  handles, blittable ss_embedded_options, geometry status, presets, limit_comb, log callback.
- *  3: ss_remote_options.auth_token. 4: ss_session_remove_geometry. */
+ *  3: ss_remote_options.auth_token. 4: ss_session_remove_geometry; ss_embedded_options gains
+ *  keep_results, result_budget_mb and data_dir (96 bytes on 64-bit platforms, was 80). */
 #define SS_ABI_VERSION 4u
 /** The ABI version of the loaded library. */
 SS_API uint32_t ss_abi_version(void);
