@@ -8,6 +8,7 @@
 
 #include <bit>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -388,6 +389,20 @@ PersistentStore::~PersistentStore() {
   if (lock_fd_ >= 0) ::close(lock_fd_);  // releases the lock
 }
 
+template <class Write>
+Result<void> PersistentStore::timed(Write&& write) {
+  const auto start = std::chrono::steady_clock::now();
+  Result<void> done = write();
+  write_seconds_.observe(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  (done ? writes_ : write_failures_).fetch_add(1, std::memory_order_relaxed);
+  return done;
+}
+
+PersistentStore::WriteStats PersistentStore::write_stats() const {
+  return WriteStats{writes_.load(std::memory_order_relaxed), write_failures_.load(std::memory_order_relaxed),
+                    write_seconds_.snapshot()};
+}
+
 Result<int64_t> PersistentStore::seq_of(const GeomId& id) {
   Reset reset{find_seq_};
   sqlite3_bind_blob(find_seq_, 1, id.bytes.data(), static_cast<int>(id.bytes.size()), SQLITE_STATIC);
@@ -398,100 +413,108 @@ Result<int64_t> PersistentStore::seq_of(const GeomId& id) {
 }
 
 Result<void> PersistentStore::save_geometry(const GeomId& id, const Geometry& geometry, uint32_t first_res_id) {
-  const std::string body = wire::encode_geometry_json(geometry.mesh, geometry.material);
-  std::lock_guard lock(mu_);
-  Reset reset{insert_geometry_};
-  sqlite3_bind_blob(insert_geometry_, 1, id.bytes.data(), static_cast<int>(id.bytes.size()), SQLITE_STATIC);
-  sqlite3_bind_text(insert_geometry_, 2, geometry.name_space.data(), static_cast<int>(geometry.name_space.size()),
-                    SQLITE_STATIC);
-  sqlite3_bind_text(insert_geometry_, 3, body.data(), static_cast<int>(body.size()), SQLITE_STATIC);
-  sqlite3_bind_int64(insert_geometry_, 4, first_res_id > 0 ? int64_t{first_res_id} - 1 : 0);
-  if (sqlite3_step(insert_geometry_) != SQLITE_DONE) return failure("written (geometry " + id.hex() + ")");
-  return {};
+  return timed([&]() -> Result<void> {
+    const std::string body = wire::encode_geometry_json(geometry.mesh, geometry.material);
+    std::lock_guard lock(mu_);
+    Reset reset{insert_geometry_};
+    sqlite3_bind_blob(insert_geometry_, 1, id.bytes.data(), static_cast<int>(id.bytes.size()), SQLITE_STATIC);
+    sqlite3_bind_text(insert_geometry_, 2, geometry.name_space.data(), static_cast<int>(geometry.name_space.size()),
+                      SQLITE_STATIC);
+    sqlite3_bind_text(insert_geometry_, 3, body.data(), static_cast<int>(body.size()), SQLITE_STATIC);
+    sqlite3_bind_int64(insert_geometry_, 4, first_res_id > 0 ? int64_t{first_res_id} - 1 : 0);
+    if (sqlite3_step(insert_geometry_) != SQLITE_DONE) return failure("written (geometry " + id.hex() + ")");
+    return {};
+  });
 }
 
 Result<void> PersistentStore::save_result(const GeomId& id, const StoredResult& result) {
-  const std::string request = wire::encode_request_json(result.request);
-  const std::string stats = encode_stats(result);
-  const std::string holds = result.holds ? encode_holds(*result.holds) : std::string();
-  const int64_t stored_at =
-      std::chrono::duration_cast<std::chrono::nanoseconds>(result.stored_at.time_since_epoch()).count();
-  std::lock_guard lock(mu_);
-  auto seq = seq_of(id);
-  if (!seq) return seq.error();
-  Reset reset{insert_result_};
-  sqlite3_stmt* st = insert_result_;
-  sqlite3_bind_int64(st, 1, *seq);
-  sqlite3_bind_int64(st, 2, result.res_id);
-  sqlite3_bind_int64(st, 3, stored_at);
-  sqlite3_bind_blob64(st, 4, result.positions.data(), result.positions.size() * sizeof(Vec3), SQLITE_STATIC);
-  sqlite3_bind_text64(st, 5, request.data(), request.size(), SQLITE_STATIC, SQLITE_UTF8);
-  sqlite3_bind_blob(st, 6, stats.data(), static_cast<int>(stats.size()), SQLITE_STATIC);
-  if (result.holds) sqlite3_bind_blob64(st, 7, holds.data(), holds.size(), SQLITE_STATIC);
-  const std::string_view holds_view(holds);
-  const std::string_view positions(reinterpret_cast<const char*>(result.positions.data()),
-                                   result.positions.size() * sizeof(Vec3));
-  sqlite3_bind_int64(st, 8, record_checksum(result.res_id, stored_at, positions, request, stats,
-                                            result.holds ? &holds_view : nullptr));
-  if (sqlite3_step(st) != SQLITE_DONE) {
-    return failure("written (result " + std::to_string(result.res_id) + " of geometry " + id.hex() + ")");
-  }
-  return {};
+  return timed([&]() -> Result<void> {
+    const std::string request = wire::encode_request_json(result.request);
+    const std::string stats = encode_stats(result);
+    const std::string holds = result.holds ? encode_holds(*result.holds) : std::string();
+    const int64_t stored_at =
+        std::chrono::duration_cast<std::chrono::nanoseconds>(result.stored_at.time_since_epoch()).count();
+    std::lock_guard lock(mu_);
+    auto seq = seq_of(id);
+    if (!seq) return seq.error();
+    Reset reset{insert_result_};
+    sqlite3_stmt* st = insert_result_;
+    sqlite3_bind_int64(st, 1, *seq);
+    sqlite3_bind_int64(st, 2, result.res_id);
+    sqlite3_bind_int64(st, 3, stored_at);
+    sqlite3_bind_blob64(st, 4, result.positions.data(), result.positions.size() * sizeof(Vec3), SQLITE_STATIC);
+    sqlite3_bind_text64(st, 5, request.data(), request.size(), SQLITE_STATIC, SQLITE_UTF8);
+    sqlite3_bind_blob(st, 6, stats.data(), static_cast<int>(stats.size()), SQLITE_STATIC);
+    if (result.holds) sqlite3_bind_blob64(st, 7, holds.data(), holds.size(), SQLITE_STATIC);
+    const std::string_view holds_view(holds);
+    const std::string_view positions(reinterpret_cast<const char*>(result.positions.data()),
+                                     result.positions.size() * sizeof(Vec3));
+    sqlite3_bind_int64(st, 8, record_checksum(result.res_id, stored_at, positions, request, stats,
+                                              result.holds ? &holds_view : nullptr));
+    if (sqlite3_step(st) != SQLITE_DONE) {
+      return failure("written (result " + std::to_string(result.res_id) + " of geometry " + id.hex() + ")");
+    }
+    return {};
+  });
 }
 
 Result<void> PersistentStore::delete_geometry(const DeletedGeometry& deleted) {
-  const GeomId& id = deleted.id;
-  const std::string holds = encode_holds(deleted.hold_versions);
-  std::lock_guard lock(mu_);
-  auto seq = seq_of(id);
-  if (!seq && seq.error().code != ErrorCode::kNotFound) return seq.error();
-  if (auto ok = exec("BEGIN"); !ok) return ok;
-  bool ok = true;
-  if (seq) {
-    for (sqlite3_stmt* st : {delete_results_, delete_geometry_}) {
-      Reset reset{st};
-      sqlite3_bind_int64(st, 1, *seq);
-      ok = ok && sqlite3_step(st) == SQLITE_DONE;
+  return timed([&]() -> Result<void> {
+    const GeomId& id = deleted.id;
+    const std::string holds = encode_holds(deleted.hold_versions);
+    std::lock_guard lock(mu_);
+    auto seq = seq_of(id);
+    if (!seq && seq.error().code != ErrorCode::kNotFound) return seq.error();
+    if (auto ok = exec("BEGIN"); !ok) return ok;
+    bool ok = true;
+    if (seq) {
+      for (sqlite3_stmt* st : {delete_results_, delete_geometry_}) {
+        Reset reset{st};
+        sqlite3_bind_int64(st, 1, *seq);
+        ok = ok && sqlite3_step(st) == SQLITE_DONE;
+      }
     }
-  }
-  if (ok) {
-    Reset reset{insert_deleted_};
-    sqlite3_bind_blob(insert_deleted_, 1, id.bytes.data(), static_cast<int>(id.bytes.size()), SQLITE_STATIC);
-    sqlite3_bind_int64(insert_deleted_, 2, deleted.next_res_id);
-    sqlite3_bind_blob(insert_deleted_, 3, holds.data(), static_cast<int>(holds.size()), SQLITE_STATIC);
-    ok = sqlite3_step(insert_deleted_) == SQLITE_DONE;
-  }
-  if (ok) {
-    Reset reset{prune_deleted_};
-    sqlite3_bind_int64(prune_deleted_, 1, static_cast<int64_t>(kMaxDeletedGeometries));
-    ok = sqlite3_step(prune_deleted_) == SQLITE_DONE;
-  }
-  if (!ok) {
-    Error err = failure("written (deleting geometry " + id.hex() + ")");
-    (void)exec("ROLLBACK");
-    return err;
-  }
-  return exec("COMMIT");
+    if (ok) {
+      Reset reset{insert_deleted_};
+      sqlite3_bind_blob(insert_deleted_, 1, id.bytes.data(), static_cast<int>(id.bytes.size()), SQLITE_STATIC);
+      sqlite3_bind_int64(insert_deleted_, 2, deleted.next_res_id);
+      sqlite3_bind_blob(insert_deleted_, 3, holds.data(), static_cast<int>(holds.size()), SQLITE_STATIC);
+      ok = sqlite3_step(insert_deleted_) == SQLITE_DONE;
+    }
+    if (ok) {
+      Reset reset{prune_deleted_};
+      sqlite3_bind_int64(prune_deleted_, 1, static_cast<int64_t>(kMaxDeletedGeometries));
+      ok = sqlite3_step(prune_deleted_) == SQLITE_DONE;
+    }
+    if (!ok) {
+      Error err = failure("written (deleting geometry " + id.hex() + ")");
+      (void)exec("ROLLBACK");
+      return err;
+    }
+    return exec("COMMIT");
+  });
 }
 
 Result<void> PersistentStore::drop_results_through(const GeomId& id, uint32_t res_id) {
-  std::lock_guard lock(mu_);
-  auto seq = seq_of(id);
-  if (!seq) return seq.error();
-  if (auto ok = exec("BEGIN"); !ok) return ok;
-  bool ok = true;
-  for (sqlite3_stmt* st : {drop_results_, set_dropped_}) {
-    Reset reset{st};
-    sqlite3_bind_int64(st, 1, *seq);
-    sqlite3_bind_int64(st, 2, res_id);
-    ok = ok && sqlite3_step(st) == SQLITE_DONE;
-  }
-  if (!ok) {
-    Error err = failure("written (dropping results of geometry " + id.hex() + ")");
-    (void)exec("ROLLBACK");
-    return err;
-  }
-  return exec("COMMIT");
+  return timed([&]() -> Result<void> {
+    std::lock_guard lock(mu_);
+    auto seq = seq_of(id);
+    if (!seq) return seq.error();
+    if (auto ok = exec("BEGIN"); !ok) return ok;
+    bool ok = true;
+    for (sqlite3_stmt* st : {drop_results_, set_dropped_}) {
+      Reset reset{st};
+      sqlite3_bind_int64(st, 1, *seq);
+      sqlite3_bind_int64(st, 2, res_id);
+      ok = ok && sqlite3_step(st) == SQLITE_DONE;
+    }
+    if (!ok) {
+      Error err = failure("written (dropping results of geometry " + id.hex() + ")");
+      (void)exec("ROLLBACK");
+      return err;
+    }
+    return exec("COMMIT");
+  });
 }
 
 Result<std::vector<RestoredGeometry>> PersistentStore::load() {

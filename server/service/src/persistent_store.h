@@ -22,6 +22,7 @@
 // Thread-safety: every member function may be called from any thread (one connection, guarded by
 // a mutex).
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -29,6 +30,7 @@
 #include <vector>
 
 #include "softshell/result.h"
+#include "softshell/service/metrics.h"
 #include "softshell/service/service.h"
 #include "softshell/session.h"
 
@@ -99,12 +101,25 @@ class PersistentStore {
   // Bytes of the database and its WAL on disk.
   size_t disk_bytes() const;
 
+  // The write calls above (save_*, delete_geometry, drop_results_through), one transaction each:
+  // how many committed, how many failed, and how long each took (waiting for the store's lock
+  // included: what the caller waited).
+  struct WriteStats {
+    uint64_t writes = 0;
+    uint64_t failures = 0;
+    Histogram::Snapshot seconds;
+  };
+  WriteStats write_stats() const;
+
  private:
   PersistentStore() = default;
   Result<void> init();
   Result<void> exec(const char* sql);
   Error failure(const std::string& what) const;
   Result<int64_t> seq_of(const GeomId& id);
+  // Runs one write and counts it (write_stats).
+  template <class Write>
+  Result<void> timed(Write&& write);
 
   std::string dir_;
   std::string db_path_;
@@ -120,6 +135,8 @@ class PersistentStore {
   sqlite3_stmt* set_dropped_ = nullptr;
   sqlite3_stmt* insert_deleted_ = nullptr;
   sqlite3_stmt* prune_deleted_ = nullptr;
+  std::atomic<uint64_t> writes_{0}, write_failures_{0};
+  Histogram write_seconds_;
 };
 
 }  // namespace softshell::service::internal

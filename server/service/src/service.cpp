@@ -891,6 +891,14 @@ ServiceStats Service::stats() const {
   s.leases_expired = impl_->leases_expired.load();
   s.followers = impl_->followers.load();
   s.hold_solve_seconds = impl_->hold_solve_hist.snapshot();
+  if (impl_->persistent) {
+    const internal::PersistentStore::WriteStats w = impl_->persistent->write_stats();
+    s.data_dir = true;
+    s.data_dir_bytes = impl_->persistent->disk_bytes();
+    s.data_dir_writes = w.writes;
+    s.data_dir_write_failures = w.failures;
+    s.data_dir_write_seconds = w.seconds;
+  }
   return s;
 }
 
