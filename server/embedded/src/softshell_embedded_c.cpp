@@ -84,7 +84,9 @@ ss_status ss_session_create_embedded_on(const ss_embedded_options* options, cons
     service.solve_threads = o.worker_threads;
     service.precompute_threads = o.worker_threads;
     if (o.cache_mb > 0) service.cache_bytes = static_cast<size_t>(o.cache_mb) << 20;
-    if (o.keep_results != 0) service.retention.keep_results = o.keep_results > 0 ? static_cast<size_t>(o.keep_results) : 0;
+    if (o.keep_results != 0) {
+      service.retention.keep_results = o.keep_results > 0 ? static_cast<size_t>(o.keep_results) : 0;  // -1: none
+    }
     service.retention.bytes_per_geometry = static_cast<size_t>(o.result_budget_mb) << 20;
     if (o.data_dir) service.data_dir = o.data_dir;
     service.logger = c_logger();

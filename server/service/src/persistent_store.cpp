@@ -624,7 +624,9 @@ Result<std::vector<DeletedGeometry>> PersistentStore::load_deleted() {
   while ((rc = sqlite3_step(raw)) == SQLITE_ROW) {
     DeletedGeometry d;
     const std::string_view id = column_bytes(raw, 0);
-    if (id.size() != d.id.bytes.size()) return damaged("a deleted geometry's id is " + std::to_string(id.size()) + " bytes long");
+    if (id.size() != d.id.bytes.size()) {
+      return damaged("a deleted geometry's id is " + std::to_string(id.size()) + " bytes long");
+    }
     std::memcpy(d.id.bytes.data(), id.data(), id.size());
     const int64_t next = sqlite3_column_int64(raw, 1);
     if (next < 1 || next > UINT32_MAX) return damaged("deleted geometry " + d.id.hex() + " has a bad next result id");
