@@ -1,6 +1,8 @@
 // The persistent store (ServiceOptions::data_dir): PersistentStore on its own (round trips,
 // deletion and retention hooks, refusals of damaged and foreign files, the directory lock) and a
-// Service restored from a directory.
+// Service restored from a directory. (Over 600 lines: the store's tests and the service's tests on
+// a directory share its fixtures, the geometry and full-result builders and the field-by-field
+// comparison.)
 #include "persistent_store.h"
 
 #include <gtest/gtest.h>

@@ -1,4 +1,6 @@
-// PersistentStore: geometries and result histories in SQLite (see persistent_store.h).
+// PersistentStore: geometries and result histories in SQLite (see persistent_store.h). (About 650
+// lines: the record codecs, the schema and its upgrade, and every statement share the one
+// connection and its lock; split, each part would need them exported.)
 #include "persistent_store.h"
 
 #include <fcntl.h>

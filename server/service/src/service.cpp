@@ -1,5 +1,5 @@
 // Service: uploads, precomputation, deformations, the result history, long polls, stresses and limit
-// combinations (holds, subscriptions and metrics have their own files). (About 800 lines: the
+// combinations (holds, subscriptions and metrics have their own files). (About 900 lines: the
 // geometry lifecycle, upload to delete, the result history with its retention, and the solve path
 // share the Impl helpers defined here.)
 #include "softshell/service/service.h"
