@@ -278,7 +278,10 @@ class Service {
   /// holds), but its result ids continue after the deleted one's last id (the service remembers
   /// the last id and hold versions of a deleted geometry, about 100 bytes each), so that no
   /// client that cached (geometry, res_id) pairs or holds a `have` can take an old result for a
-  /// new one.
+  /// new one. With a data directory this is written in the delete's transaction and restored by
+  /// the next service on the directory. The newest 16,384 deletes are remembered; past that the
+  /// oldest is forgotten (its content uploaded again starts at id 1). A failed write is
+  /// kResourceExhausted and deletes nothing.
   Result<void> remove(const GeomId& id);
 
   /// Every geometry, in upload order.
