@@ -188,7 +188,9 @@ namespace Softshell
         public double von_mises_bottom; // Pa, at -t/2
     }
 
-    /// <summary>Options of the in-process server (blittable: the host is a fixed 64-byte buffer).</summary>
+    /// <summary>Options of the in-process server (blittable: the host is a fixed 64-byte buffer, data_dir
+    /// a pointer to UTF-8 the caller owns, e.g. from Marshal.StringToCoTaskMemUTF8 or a pinned Native.Utf8
+    /// array).</summary>
     [StructLayout(LayoutKind.Sequential)]
     public unsafe struct EmbeddedOptions
     {
@@ -198,6 +200,10 @@ namespace Softshell
         public int listen;             // != 0: also serve the HTTP API on http_host:http_port
         public int http_port;          // 0: any free port
         public fixed byte http_host[HostCapacity];
+        public int keep_results;       // results kept per geometry; 0: the default (1000), -1: no count limit
+        public int result_budget_mb;   // MiB of results kept per geometry; 0: no byte limit
+        public IntPtr data_dir;        // NUL-terminated UTF-8 directory of a persistent store (copied in by
+                                       // ss_session_create_embedded; free it after); IntPtr.Zero: memory only
 
         /// <summary>Sets http_host (UTF-8, NUL-terminated, at most 63 bytes).</summary>
         public void SetHttpHost(string host)
@@ -221,7 +227,7 @@ namespace Softshell
     {
         /// <summary>libsoftshell_plugin.so / softshell_plugin.dll / libsoftshell_plugin.dylib.</summary>
         public const string Lib = "softshell_plugin";
-        public const uint AbiVersion = 3;
+        public const uint AbiVersion = 4;
         public const int Mask_X = 1, Mask_Y = 2, Mask_Z = 4, Mask_All = 7;
         public const int ForceTransferSubdivide = 0, ForceTransferVirtualWork = 1;
         public const int BoundaryEdgeAndCorner = 0, BoundaryNone = 1;
@@ -418,6 +424,10 @@ namespace Softshell
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_session_upload(IntPtr session, IntPtr mesh, ref Material material, byte[] nameSpace, out GeomId id,
                                                       out int created);
+        /// <summary>Deletes the geometry and everything kept for it; NotFound for an unknown one. An upload of
+        /// the same content later continues its result ids. Blocks for one request.</summary>
+        [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
+        public static extern Status ss_session_remove_geometry(IntPtr session, ref GeomId id);
         /// <summary>Blocks until solved: for tools and tests; a frame loop uses ss_session_deform_begin.</summary>
         [DllImport(Lib, CallingConvention = CallingConvention.Cdecl)]
         public static extern Status ss_session_deform(IntPtr session, ref GeomId id, IntPtr request, out uint resId, double[] outXyz,

@@ -124,7 +124,9 @@ static class SoftshellSmoke
         Check(Marshal.SizeOf(typeof(GrabOptions)) == 8 && Marshal.SizeOf(typeof(FloorOptions)) == 16, "option sizes");
         Check(Marshal.SizeOf(typeof(RemoteOptions)) == 16 + IntPtr.Size && Marshal.OffsetOf(typeof(RemoteOptions), "auth_token").ToInt32() == 16 &&
               Marshal.SizeOf(typeof(GeometryStatus)) == 24, "RemoteOptions/GeometryStatus size");
-        Check(Marshal.SizeOf(typeof(EmbeddedOptions)) == 80 && Marshal.OffsetOf(typeof(EmbeddedOptions), "http_host").ToInt32() == 16,
+        Check(Marshal.SizeOf(typeof(EmbeddedOptions)) == 88 + IntPtr.Size && Marshal.OffsetOf(typeof(EmbeddedOptions), "http_host").ToInt32() == 16 &&
+              Marshal.OffsetOf(typeof(EmbeddedOptions), "keep_results").ToInt32() == 80 &&
+              Marshal.OffsetOf(typeof(EmbeddedOptions), "data_dir").ToInt32() == 88,
               "EmbeddedOptions layout");
 
         Check(Native.ss_abi_version() == Native.AbiVersion, "ABI version " + Native.ss_abi_version());
@@ -268,6 +270,28 @@ static class SoftshellSmoke
         Check(releasedId == 4, "releasing stores the rest shape");
         Check(Native.ss_session_release_hold(session, ref id, Native.Utf8("csharp.clamp"), out releasedId) == Status.NotFound,
               "a released hold is gone");
+        // Deleting the geometry: the follower's stream ends, the id is unknown, and the same content
+        // uploaded again continues the result ids (1..4 belonged to the deleted upload).
+        Native.Check(Native.ss_session_remove_geometry(session, ref id));
+        Check(Native.ss_session_geometry_status(remote, ref id, out status, why, why.Length) == Status.NotFound,
+              "a deleted geometry is unknown");
+        Check(Native.ss_session_remove_geometry(remote, ref id) == Status.NotFound && Native.LastError().Contains("no geometry with id"),
+              "deleting it again: not found");
+        for (int frame = 0; frame < 10000 && feedState != Native.FeedFailed; ++frame)
+        {
+            Native.Check(Native.ss_subscription_state(feed, out feedState));
+            if (feedState != Native.FeedFailed) Thread.Sleep(1);
+        }
+        // What arrived before the end is taken first (the release's result 4), then the end: Gone.
+        Status polled = Status.Ok;
+        for (int taken = 0; taken < 10 && polled == Status.Ok; ++taken)
+            polled = Native.ss_subscription_poll(feed, out followed, out seen, latest, NV, out count);
+        Check(feedState == Native.FeedFailed && polled == Status.Gone, "the follower's stream ends with gone");
+        GeomId again;
+        Native.Check(Native.ss_session_upload(remote, plate, ref aluminium, null, out again, out created));
+        Check(created == 1 && again.Equals(id), "uploaded again: a new geometry under the same id");
+        Native.Check(Native.ss_session_deform(remote, ref again, one, out resId, latest, NV, out count));
+        Check(resId == 5, "the ids continue after the deleted upload's (got " + resId + ")");
         Native.ss_subscription_destroy(feed);
         Native.ss_session_destroy(remote);
 

@@ -254,7 +254,7 @@ TEST(HttpAuthTest, CRemoteOptionsCarryTheToken) {
   ss_remote_options o;
   ss_remote_options_default(&o);
   EXPECT_EQ(o.auth_token, nullptr);
-  EXPECT_EQ(ss_abi_version(), 3u);
+  EXPECT_EQ(ss_abi_version(), 4u);
 
   // A 4 x 4 grid of quads over [0, 1]^2.
   constexpr int n = 4;

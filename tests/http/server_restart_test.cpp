@@ -1,6 +1,7 @@
 // softshell-server --data-dir: kill -9 while 8 clients post deformations, restart on the same
 // directory, and every result answered 200 is there with the same id and bytes; a clean restart
-// restores everything; a damaged store or a directory another server holds is refused.
+// restores everything; a deleted geometry's ids continue after a restart when its content is
+// uploaded again; a damaged store or a directory another server holds is refused.
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -192,6 +193,53 @@ TEST(ServerRestartTest, CleanRestartRestoresEverything) {
   const Reply latest = get(c, "/geometries/" + geom + "/latest_result?have=0", kJson);
   EXPECT_EQ(latest.status, 200);
   EXPECT_EQ(latest.body, before.back().json);
+}
+
+// Upload, post results, DELETE, kill -9 (no clean shutdown: the delete's answer is enough),
+// restart on the same directory, upload the same content again: its ids continue after the
+// deleted ones, which stay 410, and nothing is reused (also across a second restart).
+TEST(ServerRestartTest, IdsOfADeletedGeometryContinueAfterARestart) {
+  TempDir dir("softshell-restart");
+  std::string geom;
+  auto post_one = [](int port, const std::string& g, int k) {
+    httplib::Client c("127.0.0.1", port);
+    const Reply r = post(c, "/geometries/" + g + "/results", wire::encode_request_json(pinned_push(k)), kJson, kJson);
+    EXPECT_EQ(r.status, 200) << r.body;
+    return r.status == 200 ? wire::decode_result_json(r.body).value().res_id : 0u;
+  };
+  {
+    Server server(dir.path);
+    ASSERT_GT(server.port, 0) << server.child.drain_stderr();
+    geom = upload(server.port, exact_grid(4));
+    for (int k = 1; k <= 3; ++k) EXPECT_EQ(post_one(server.port, geom, k), static_cast<uint32_t>(k));
+    httplib::Client c("127.0.0.1", server.port);
+    auto gone = c.Delete("/geometries/" + geom);
+    ASSERT_TRUE(gone);
+    ASSERT_EQ(gone->status, 204) << gone->body;
+    kill(server.child.pid(), SIGKILL);
+    server.child.wait(std::chrono::seconds(30));
+  }
+  {
+    Server server(dir.path);
+    ASSERT_GT(server.port, 0) << server.child.drain_stderr();
+    httplib::Client c("127.0.0.1", server.port);
+    EXPECT_EQ(get(c, "/geometries/" + geom + "/status").status, 404);  // the delete held
+    EXPECT_EQ(upload(server.port, exact_grid(4)), geom);
+    EXPECT_EQ(post_one(server.port, geom, 4), 4u);
+    EXPECT_EQ(ids_of(server.port, geom), (std::vector<uint32_t>{4}));
+    const Reply old = get(c, path_of(geom, 2), kJson);
+    EXPECT_EQ(old.status, 410) << old.body;
+    EXPECT_NE(old.body.find("earlier upload of it that was deleted"), std::string::npos) << old.body;
+    kill(server.child.pid(), SIGTERM);
+    EXPECT_EQ(server.child.wait(std::chrono::seconds(30)), 0);
+  }
+  // The second life, restored: still after the first, and the first's ids still 410.
+  Server server(dir.path);
+  ASSERT_GT(server.port, 0) << server.child.drain_stderr();
+  httplib::Client c("127.0.0.1", server.port);
+  EXPECT_EQ(ids_of(server.port, geom), (std::vector<uint32_t>{4}));
+  EXPECT_EQ(get(c, path_of(geom, 3), kJson).status, 410);
+  EXPECT_EQ(post_one(server.port, geom, 5), 5u);
 }
 
 TEST(ServerRestartTest, ADamagedStoreIsRefusedWithAClearMessage) {

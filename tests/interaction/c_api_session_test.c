@@ -17,9 +17,12 @@
 #include "c_check.h"
 
 /* The layout P/Invoke and other bindings see (bindings/csharp/Softshell.cs): fixed-size fields. */
-_Static_assert(sizeof(ss_embedded_options) == 80, "ss_embedded_options is 80 bytes");
+_Static_assert(sizeof(ss_embedded_options) == 88 + sizeof(void*), "ss_embedded_options is 96 bytes (92 on 32-bit)");
 _Static_assert(offsetof(ss_embedded_options, listen) == 8 && offsetof(ss_embedded_options, http_port) == 12 &&
-                   offsetof(ss_embedded_options, http_host) == 16,
+                   offsetof(ss_embedded_options, http_host) == 16 &&
+                   offsetof(ss_embedded_options, keep_results) == 80 &&
+                   offsetof(ss_embedded_options, result_budget_mb) == 84 &&
+                   offsetof(ss_embedded_options, data_dir) == 88,
                "ss_embedded_options field offsets");
 _Static_assert(sizeof(ss_geometry_status) == 24 && offsetof(ss_geometry_status, progress) == 16,
                "ss_geometry_status layout");

@@ -1,6 +1,8 @@
 // The persistent store (ServiceOptions::data_dir): PersistentStore on its own (round trips,
 // deletion and retention hooks, refusals of damaged and foreign files, the directory lock) and a
-// Service restored from a directory.
+// Service restored from a directory. (Over 600 lines: the store's tests and the service's tests on
+// a directory share its fixtures, the geometry and full-result builders and the field-by-field
+// comparison.)
 #include "persistent_store.h"
 
 #include <gtest/gtest.h>
@@ -9,6 +11,7 @@
 #include <stdlib.h>
 #include <sys/resource.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -188,8 +191,8 @@ TEST(PersistentStoreTest, DeleteAndDropKeepIdsGoingForward) {
     EXPECT_EQ(loaded[1].dropped_through, 5u);
     EXPECT_TRUE(loaded[1].results.empty());
 
-    ASSERT_TRUE(store->delete_geometry(id_of(a)));
-    ASSERT_TRUE(store->delete_geometry(id_of(a)));  // already gone: nothing to do
+    ASSERT_TRUE(store->delete_geometry({id_of(a), 6, {}}));
+    ASSERT_TRUE(store->delete_geometry({id_of(a), 6, {}}));  // already gone: only its record again
     ASSERT_TRUE(store->save_geometry(id_of(a), a));  // the id is reusable, its history starts afresh
     ASSERT_TRUE(store->save_result(id_of(a), full_result(1, nv)));
   }
@@ -200,6 +203,86 @@ TEST(PersistentStoreTest, DeleteAndDropKeepIdsGoingForward) {
   EXPECT_EQ(loaded[1].dropped_through, 0u);
   ASSERT_EQ(loaded[1].results.size(), 1u);
   EXPECT_EQ(loaded[1].results[0]->res_id, 1u);
+}
+
+// A delete's record (next result id, hold versions) is in the store once the call returns and
+// comes back at load_deleted; an upload continuing it starts after its ids; the newest
+// kMaxDeletedGeometries records are kept, a deleted id again moves to the newest.
+TEST(PersistentStoreTest, RemembersDeletedGeometriesBounded) {
+  TempDir dir("softshell-store");
+  const Geometry a = grid_geometry("a");
+  const int nv = a.mesh.num_vertices();
+  const HoldVersions holds{{"grab", 4}, {"pin", 2}};
+  {
+    auto store = open_ok(dir.path);
+    ASSERT_TRUE(store->save_geometry(id_of(a), a));
+    for (uint32_t k = 1; k <= 3; ++k) ASSERT_TRUE(store->save_result(id_of(a), full_result(k, nv)));
+    ASSERT_TRUE(store->delete_geometry({id_of(a), 4, holds}));
+  }
+  {
+    auto store = open_ok(dir.path);
+    EXPECT_TRUE(store->load().value().empty());
+    const auto deleted = store->load_deleted().value();
+    ASSERT_EQ(deleted.size(), 1u);
+    EXPECT_EQ(deleted[0].id, id_of(a));
+    EXPECT_EQ(deleted[0].next_res_id, 4u);
+    EXPECT_EQ(deleted[0].hold_versions, holds);
+    // Uploaded again: results 1..3 count as dropped, 4 follows.
+    ASSERT_TRUE(store->save_geometry(id_of(a), a, 4));
+    ASSERT_TRUE(store->save_result(id_of(a), full_result(4, nv)));
+  }
+  {
+    auto store = open_ok(dir.path);
+    const auto loaded = store->load().value();
+    ASSERT_EQ(loaded.size(), 1u);
+    EXPECT_EQ(loaded[0].dropped_through, 3u);
+    ASSERT_EQ(loaded[0].results.size(), 1u);
+    EXPECT_EQ(loaded[0].results[0]->res_id, 4u);
+    EXPECT_EQ(store->load_deleted().value().size(), 1u);  // kept: the new upload's life began there
+
+    // The bound: one more than it keeps, then `a` again (it moves to the newest).
+    constexpr size_t kMax = PersistentStore::kMaxDeletedGeometries;
+    std::vector<GeomId> ids(kMax + 1);
+    for (size_t k = 0; k < ids.size(); ++k) {
+      std::memcpy(ids[k].bytes.data(), &k, sizeof k);
+      ASSERT_TRUE(store->delete_geometry({ids[k], static_cast<uint32_t>(k + 2), {}}));
+    }
+    ASSERT_TRUE(store->delete_geometry({id_of(a), 5, {}}));
+    const auto deleted = store->load_deleted().value();
+    ASSERT_EQ(deleted.size(), kMax);
+    EXPECT_EQ(deleted.front().id, ids[2]);  // ids[0], and a's old record, were the oldest
+    EXPECT_EQ(deleted.front().next_res_id, 4u);
+    EXPECT_EQ(deleted[kMax - 2].id, ids[kMax]);
+    EXPECT_EQ(deleted.back().id, id_of(a));
+    EXPECT_EQ(deleted.back().next_res_id, 5u);
+    EXPECT_TRUE(store->load().value().empty());
+  }
+}
+
+// A store of schema version 1 (before deleted geometries were kept) opens and is upgraded.
+TEST(PersistentStoreTest, UpgradesAVersion1Store) {
+  TempDir dir("softshell-store");
+  const Geometry a = grid_geometry();
+  {
+    auto store = open_ok(dir.path);
+    ASSERT_TRUE(store->save_geometry(id_of(a), a));
+  }
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(db_of(dir).c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db,
+                         "DROP TABLE deleted_geometries;"
+                         "UPDATE softshell_meta SET value = '1' WHERE key = 'schema_version'",
+                         nullptr, nullptr, nullptr),
+            SQLITE_OK);
+  sqlite3_close(db);
+  {
+    auto store = open_ok(dir.path);
+    EXPECT_EQ(store->load().value().size(), 1u);
+    EXPECT_TRUE(store->load_deleted().value().empty());
+    ASSERT_TRUE(store->delete_geometry({id_of(a), 1, {}}));
+  }
+  auto store = open_ok(dir.path);
+  EXPECT_EQ(store->load_deleted().value().size(), 1u);
 }
 
 TEST(PersistentStoreTest, ADirectoryIsHeldByOneStoreAtATime) {
@@ -259,10 +342,10 @@ TEST(PersistentStoreTest, RefusesANewerOrUnknownSchema) {
   open_ok(dir.path).reset();
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open(db_of(dir).c_str(), &db), SQLITE_OK);
-  ASSERT_EQ(sqlite3_exec(db, "UPDATE softshell_meta SET value = '2' WHERE key = 'schema_version'", nullptr, nullptr,
+  ASSERT_EQ(sqlite3_exec(db, "UPDATE softshell_meta SET value = '3' WHERE key = 'schema_version'", nullptr, nullptr,
                          nullptr),
             SQLITE_OK);
-  expect_refused(dir, "was written by a newer softshell (store schema version 2; this build reads version 1)");
+  expect_refused(dir, "was written by a newer softshell (store schema version 3; this build reads version 2)");
   ASSERT_EQ(sqlite3_exec(db, "UPDATE softshell_meta SET value = 'x' WHERE key = 'schema_version'", nullptr, nullptr,
                          nullptr),
             SQLITE_OK);
@@ -419,6 +502,55 @@ TEST(PersistentServiceTest, RetentionAndDeletesSurviveARestart) {
   EXPECT_EQ((*next)->res_id, 8u);
   EXPECT_EQ(s.result_ids(kept).value(), (std::vector<uint32_t>{6, 7, 8}));
   EXPECT_EQ(s.info(deleted).error().code, ErrorCode::kNotFound);
+}
+
+// A deleted geometry's continuation survives a restart: uploaded again on the restarted service,
+// its ids (and hold versions) continue after the deleted upload's, whose ids are kGone; and after
+// a second restart, with the new upload restored, still so.
+TEST(PersistentServiceTest, IdsOfADeletedGeometryContinueAfterARestart) {
+  TempDir dir("softshell-store");
+  GeomId id;
+  {
+    Service s(on(dir));
+    id = s.upload(exact_grid(), exact_material()).value().id;
+    for (int k = 1; k <= 2; ++k) ASSERT_TRUE(s.deform(id, pinned_push(k)).get());
+    auto held = s.put_hold(id, "push", pinned_push(3));  // result 3, and version 1 of "push"
+    ASSERT_TRUE(held) << held.error().message;
+    EXPECT_EQ(held->version, 1u);
+    ASSERT_TRUE(held->outcome.get());
+    ASSERT_TRUE(s.remove(id));
+  }
+  {
+    Service s(on(dir));
+    EXPECT_EQ(s.info(id).error().code, ErrorCode::kNotFound);
+    ASSERT_TRUE(s.upload(exact_grid(), exact_material()).value().created);
+    auto r = s.deform(id, pinned_push(4)).get();
+    ASSERT_TRUE(r) << r.error().message;
+    EXPECT_EQ((*r)->res_id, 4u);
+    auto held = s.put_hold(id, "push", pinned_push(3));
+    ASSERT_TRUE(held) << held.error().message;
+    EXPECT_EQ(held->version, 2u);
+    ASSERT_TRUE(held->outcome.get());  // result 5
+    ASSERT_TRUE(s.release_hold(id, "push").value().outcome.get());  // result 6
+    EXPECT_EQ(s.result(id, 3).error().code, ErrorCode::kGone);
+    EXPECT_NE(s.result(id, 3).error().message.find("earlier upload of it that was deleted"), std::string::npos);
+  }
+  {
+    Service s(on(dir));
+    EXPECT_EQ(s.result_ids(id).value(), (std::vector<uint32_t>{4, 5, 6}));
+    EXPECT_NE(s.result(id, 2).error().message.find("earlier upload of it that was deleted"), std::string::npos);
+    auto held = s.put_hold(id, "push", pinned_push(3));  // the deleted life's version 1 is not reused
+    ASSERT_TRUE(held) << held.error().message;
+    EXPECT_EQ(held->version, 3u);
+    ASSERT_TRUE(held->outcome.get());  // result 7
+    ASSERT_TRUE(s.remove(id));  // a second delete replaces the first's record
+  }
+  Service s(on(dir));
+  ASSERT_TRUE(s.upload(exact_grid(), exact_material()));
+  auto r = s.deform(id, pinned_push(6)).get();
+  ASSERT_TRUE(r) << r.error().message;
+  EXPECT_EQ((*r)->res_id, 8u);
+  EXPECT_EQ(s.put_hold(id, "push", pinned_push(3)).value().version, 4u);
 }
 
 TEST(PersistentServiceTest, RefusesToStartWhenTheStoreDoesNotFitTheBudget) {

@@ -139,6 +139,13 @@ ss_status ss_session_upload(ss_session* session, const ss_mesh* mesh, const ss_m
   });
 }
 
+ss_status ss_session_remove_geometry(ss_session* session, const ss_geom_id* id) {
+  return guard("ss_session_remove_geometry", [&] {
+    const auto s = live(session, "session");
+    s->remove_geometry(geom_id(id)).value();
+  });
+}
+
 ss_status ss_session_deform(ss_session* session, const ss_geom_id* id, const ss_request* request,
                             uint32_t* out_res_id, double* out_xyz, int32_t capacity, int32_t* out_count) {
   return guard("ss_session_deform", [&] {

@@ -11,7 +11,7 @@
 
 // The layouts that C, C# (P/Invoke, sequential layout; bindings/csharp/Softshell.cs) and Unreal
 // rely on. Changing one is an ABI break: bump SS_ABI_VERSION (and the C# file).
-static_assert(SS_ABI_VERSION == 3u);
+static_assert(SS_ABI_VERSION == 4u);
 static_assert(sizeof(ss_vec3) == 24 && sizeof(ss_quat) == 32 && sizeof(ss_pose) == 56);
 static_assert(sizeof(ss_surface_point) == 24 && offsetof(ss_surface_point, u) == 8);
 static_assert(sizeof(ss_material) == 32 && sizeof(ss_geom_id) == 16);

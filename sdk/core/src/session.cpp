@@ -59,6 +59,10 @@ Error no_holds() {
 }
 }  // namespace
 
+Result<void> Session::remove_geometry(const GeomId&) {
+  return Error{ErrorCode::kUnavailable, "this session does not support deleting geometries"};
+}
+
 Result<HeldResult> Session::put_hold(const GeomId&, const std::string&, const DeformationRequest&,
                                      std::chrono::milliseconds) {
   return no_holds();

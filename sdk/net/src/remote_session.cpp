@@ -181,4 +181,11 @@ Result<StressField> RemoteSession::stresses(const GeomId& id, uint32_t res_id, c
   return wire::decode_stress_field_json(reply->body);
 }
 
+Result<void> RemoteSession::remove_geometry(const GeomId& id) {
+  auto reply = impl_->del(geometry_path(id), wire::kJsonMediaType, std::chrono::milliseconds(0));
+  if (!reply) return reply.error();
+  if (reply->status != 204) return impl_->server_error(*reply);
+  return {};
+}
+
 }  // namespace softshell

@@ -97,4 +97,6 @@ Result<StressField> EmbeddedSession::stresses(const GeomId& id, uint32_t res_id,
   return service_->stresses(id, res_id, query);
 }
 
+Result<void> EmbeddedSession::remove_geometry(const GeomId& id) { return service_->remove(id); }
+
 }  // namespace softshell

@@ -15,7 +15,9 @@
 extern "C" {
 
 // The layout C# and other bindings rely on (an ABI break if it changes: bump SS_ABI_VERSION).
-static_assert(sizeof(ss_embedded_options) == 80 && offsetof(ss_embedded_options, http_host) == 16);
+static_assert(offsetof(ss_embedded_options, http_host) == 16 && offsetof(ss_embedded_options, keep_results) == 80 &&
+              offsetof(ss_embedded_options, result_budget_mb) == 84 && offsetof(ss_embedded_options, data_dir) == 88);
+static_assert(sizeof(ss_embedded_options) == 88 + sizeof(void*));  // 96 on 64-bit, 92 on 32-bit platforms
 static_assert(std::is_trivially_copyable_v<ss_embedded_options> && std::is_standard_layout_v<ss_embedded_options>);
 
 static_assert(static_cast<int>(softshell::service::LogLevel::kDebug) == SS_LOG_DEBUG &&
@@ -58,6 +60,13 @@ ss_status ss_session_create_embedded_on(const ss_embedded_options* options, cons
       softshell::fail(ErrorCode::kInvalidArgument, "worker_threads must be in 0..1024 (0 = the number of cores)");
     }
     if (o.cache_mb < 0) softshell::fail(ErrorCode::kInvalidArgument, "cache_mb must not be negative");
+    if (o.keep_results < -1) {
+      softshell::fail(ErrorCode::kInvalidArgument, "keep_results must be -1 (no limit), 0 (the default: 1000) or a "
+                                                   "count, got " + std::to_string(o.keep_results));
+    }
+    if (o.result_budget_mb < 0) {
+      softshell::fail(ErrorCode::kInvalidArgument, "result_budget_mb must not be negative (0: no byte limit)");
+    }
     std::string host;
     if (o.listen != 0) {
       const void* nul = std::memchr(o.http_host, '\0', sizeof(o.http_host));
@@ -75,9 +84,15 @@ ss_status ss_session_create_embedded_on(const ss_embedded_options* options, cons
     service.solve_threads = o.worker_threads;
     service.precompute_threads = o.worker_threads;
     if (o.cache_mb > 0) service.cache_bytes = static_cast<size_t>(o.cache_mb) << 20;
+    if (o.keep_results != 0) {
+      service.retention.keep_results = o.keep_results > 0 ? static_cast<size_t>(o.keep_results) : 0;  // -1: none
+    }
+    service.retention.bytes_per_geometry = static_cast<size_t>(o.result_budget_mb) << 20;
+    if (o.data_dir) service.data_dir = o.data_dir;
     service.logger = c_logger();
     if (tasks) service.executor = softshell::c_api::executor_of(*tasks);
-    auto session = std::make_shared<softshell::EmbeddedSession>(service);
+    // Service::create: a data directory that cannot be used is an error status, not a throw.
+    auto session = std::make_shared<softshell::EmbeddedSession>(softshell::service::Service::create(service).value());
     if (o.listen != 0) {
       softshell::http::ServerOptions http;
       http.logger = c_logger();

@@ -12,6 +12,8 @@ Result<void> Service::Impl::restore() {
   if (!opened) return opened.error();
   auto loaded = (*opened)->load();
   if (!loaded) return loaded.error();
+  auto deleted_records = (*opened)->load_deleted();
+  if (!deleted_records) return deleted_records.error();
 
   // What is stored must fit the budget, all of it: nothing is dropped to make room. The models
   // are rebuilt, so they count (as estimates, then their real size) beyond that, as uploads'
@@ -69,6 +71,27 @@ Result<void> Service::Impl::restore() {
     for (const auto& e : restored) {
       by_id.emplace(e->id, e);
       in_order.push_back(e);
+    }
+    // Deleted geometries, oldest delete first: a tombstone again, or, for content uploaded again
+    // since, where that upload's life began and its holds' versions (its row's dropped_through
+    // already starts its ids after the deleted ones).
+    for (DeletedGeometry& d : *deleted_records) {
+      Tombstone dead;
+      dead.next_res_id = d.next_res_id;
+      for (auto& [hold_id, version] : d.hold_versions) dead.hold_versions[std::move(hold_id)] = version;
+      auto live = by_id.find(d.id);
+      if (live == by_id.end()) {
+        remember_deleted_locked(d.id, std::move(dead));
+        continue;
+      }
+      Entry& e = *live->second;
+      std::lock_guard entry_lock(e.mu);
+      e.first_of_life = std::min(dead.next_res_id, e.first_kept);
+      for (const auto& [hold_id, version] : dead.hold_versions) {
+        uint64_t& next = e.holds.retired[hold_id];
+        next = std::max(next, version);
+      }
+      while (e.holds.retired.size() > HoldTable::kMaxRetired) e.holds.retired.erase(e.holds.retired.begin());
     }
   }
   persistent = std::move(*opened);

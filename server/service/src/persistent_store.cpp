@@ -1,4 +1,6 @@
-// PersistentStore: geometries and result histories in SQLite (see persistent_store.h).
+// PersistentStore: geometries and result histories in SQLite (see persistent_store.h). (About 650
+// lines: the record codecs, the schema and its upgrade, and every statement share the one
+// connection and its lock; split, each part would need them exported.)
 #include "persistent_store.h"
 
 #include <fcntl.h>
@@ -8,6 +10,7 @@
 
 #include <bit>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -24,6 +27,11 @@ namespace {
 
 constexpr const char* kDbName = "softshell.db";
 constexpr const char* kLockName = "softshell.lock";
+// Added in schema version 2 (created by an upgrade of a version-1 store, too). `seq` orders the
+// deletes: INSERT OR REPLACE of an id deletes its older row and gives the new one the next seq.
+constexpr const char* kDeletedTable =
+    "CREATE TABLE deleted_geometries(seq INTEGER PRIMARY KEY AUTOINCREMENT, id BLOB NOT NULL UNIQUE,"
+    " next_res_id INTEGER NOT NULL, holds BLOB NOT NULL);";
 
 // A fixed little-endian record (solve statistics, hold versions, positions).
 class Writer {
@@ -318,8 +326,8 @@ Result<void> PersistentStore::init() {
         " name_space TEXT NOT NULL, geometry TEXT NOT NULL, dropped_through INTEGER NOT NULL DEFAULT 0);"
         "CREATE TABLE results(geom_seq INTEGER NOT NULL, res_id INTEGER NOT NULL, stored_at_ns INTEGER NOT NULL,"
         " positions BLOB NOT NULL, request TEXT NOT NULL, stats BLOB NOT NULL, holds BLOB, checksum INTEGER NOT NULL,"
-        " PRIMARY KEY(geom_seq, res_id)) WITHOUT ROWID;"
-        "COMMIT;";
+        " PRIMARY KEY(geom_seq, res_id)) WITHOUT ROWID;" +
+        std::string(kDeletedTable) + "COMMIT;";
     if (auto ok = exec(schema.c_str()); !ok) return ok;
   } else {
     std::string application, version;
@@ -329,6 +337,15 @@ Result<void> PersistentStore::init() {
                    db_path_ + " is an SQLite database but not a softshell store; use another --data-dir"};
     }
     if (!scalar("SELECT value FROM softshell_meta WHERE key = 'schema_version'", version)) return failure("read");
+    if (version == "1") {  // the same tables but the deleted geometries' one
+      const std::string upgrade = "BEGIN;" + std::string(kDeletedTable) +
+                                  "UPDATE softshell_meta SET value = '2' WHERE key = 'schema_version'; COMMIT;";
+      if (auto ok = exec(upgrade.c_str()); !ok) {
+        (void)exec("ROLLBACK");
+        return ok;
+      }
+      version = "2";
+    }
     if (version != std::to_string(kSchemaVersion)) {
       const bool newer = !version.empty() && version.find_first_not_of("0123456789") == std::string::npos &&
                          version.size() < 9 && std::stoi(version) > kSchemaVersion;
@@ -342,7 +359,7 @@ Result<void> PersistentStore::init() {
   }
 
   const std::pair<sqlite3_stmt**, const char*> statements[] = {
-      {&insert_geometry_, "INSERT INTO geometries(id, name_space, geometry) VALUES(?1, ?2, ?3)"},
+      {&insert_geometry_, "INSERT INTO geometries(id, name_space, geometry, dropped_through) VALUES(?1, ?2, ?3, ?4)"},
       {&insert_result_,
        "INSERT INTO results(geom_seq, res_id, stored_at_ns, positions, request, stats, holds, checksum) "
        "VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)"},
@@ -351,6 +368,11 @@ Result<void> PersistentStore::init() {
       {&delete_geometry_, "DELETE FROM geometries WHERE seq = ?1"},
       {&drop_results_, "DELETE FROM results WHERE geom_seq = ?1 AND res_id <= ?2"},
       {&set_dropped_, "UPDATE geometries SET dropped_through = max(dropped_through, ?2) WHERE seq = ?1"},
+      {&insert_deleted_, "INSERT OR REPLACE INTO deleted_geometries(id, next_res_id, holds) VALUES(?1, ?2, ?3)"},
+      // Keeps the newest ?1 rows (by seq); a no-op while there are no more.
+      {&prune_deleted_,
+       "DELETE FROM deleted_geometries WHERE seq <= (SELECT seq FROM deleted_geometries ORDER BY seq DESC "
+       "LIMIT 1 OFFSET ?1)"},
   };
   for (const auto& [st, sql] : statements) {
     if (sqlite3_prepare_v3(db_, sql, -1, SQLITE_PREPARE_PERSISTENT, st, nullptr) != SQLITE_OK) {
@@ -362,11 +384,25 @@ Result<void> PersistentStore::init() {
 
 PersistentStore::~PersistentStore() {
   for (sqlite3_stmt* st : {insert_geometry_, insert_result_, find_seq_, delete_results_, delete_geometry_,
-                           drop_results_, set_dropped_}) {
+                           drop_results_, set_dropped_, insert_deleted_, prune_deleted_}) {
     sqlite3_finalize(st);
   }
   if (db_) sqlite3_close(db_);  // checkpoints the WAL into the database
   if (lock_fd_ >= 0) ::close(lock_fd_);  // releases the lock
+}
+
+template <class Write>
+Result<void> PersistentStore::timed(Write&& write) {
+  const auto start = std::chrono::steady_clock::now();
+  Result<void> done = write();
+  write_seconds_.observe(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  (done ? writes_ : write_failures_).fetch_add(1, std::memory_order_relaxed);
+  return done;
+}
+
+PersistentStore::WriteStats PersistentStore::write_stats() const {
+  return WriteStats{writes_.load(std::memory_order_relaxed), write_failures_.load(std::memory_order_relaxed),
+                    write_seconds_.snapshot()};
 }
 
 Result<int64_t> PersistentStore::seq_of(const GeomId& id) {
@@ -378,84 +414,109 @@ Result<int64_t> PersistentStore::seq_of(const GeomId& id) {
   return failure("read");
 }
 
-Result<void> PersistentStore::save_geometry(const GeomId& id, const Geometry& geometry) {
-  const std::string body = wire::encode_geometry_json(geometry.mesh, geometry.material);
-  std::lock_guard lock(mu_);
-  Reset reset{insert_geometry_};
-  sqlite3_bind_blob(insert_geometry_, 1, id.bytes.data(), static_cast<int>(id.bytes.size()), SQLITE_STATIC);
-  sqlite3_bind_text(insert_geometry_, 2, geometry.name_space.data(), static_cast<int>(geometry.name_space.size()),
-                    SQLITE_STATIC);
-  sqlite3_bind_text(insert_geometry_, 3, body.data(), static_cast<int>(body.size()), SQLITE_STATIC);
-  if (sqlite3_step(insert_geometry_) != SQLITE_DONE) return failure("written (geometry " + id.hex() + ")");
-  return {};
+Result<void> PersistentStore::save_geometry(const GeomId& id, const Geometry& geometry, uint32_t first_res_id) {
+  return timed([&]() -> Result<void> {
+    const std::string body = wire::encode_geometry_json(geometry.mesh, geometry.material);
+    std::lock_guard lock(mu_);
+    Reset reset{insert_geometry_};
+    sqlite3_bind_blob(insert_geometry_, 1, id.bytes.data(), static_cast<int>(id.bytes.size()), SQLITE_STATIC);
+    sqlite3_bind_text(insert_geometry_, 2, geometry.name_space.data(), static_cast<int>(geometry.name_space.size()),
+                      SQLITE_STATIC);
+    sqlite3_bind_text(insert_geometry_, 3, body.data(), static_cast<int>(body.size()), SQLITE_STATIC);
+    sqlite3_bind_int64(insert_geometry_, 4, first_res_id > 0 ? int64_t{first_res_id} - 1 : 0);
+    if (sqlite3_step(insert_geometry_) != SQLITE_DONE) return failure("written (geometry " + id.hex() + ")");
+    return {};
+  });
 }
 
 Result<void> PersistentStore::save_result(const GeomId& id, const StoredResult& result) {
-  const std::string request = wire::encode_request_json(result.request);
-  const std::string stats = encode_stats(result);
-  const std::string holds = result.holds ? encode_holds(*result.holds) : std::string();
-  const int64_t stored_at =
-      std::chrono::duration_cast<std::chrono::nanoseconds>(result.stored_at.time_since_epoch()).count();
-  std::lock_guard lock(mu_);
-  auto seq = seq_of(id);
-  if (!seq) return seq.error();
-  Reset reset{insert_result_};
-  sqlite3_stmt* st = insert_result_;
-  sqlite3_bind_int64(st, 1, *seq);
-  sqlite3_bind_int64(st, 2, result.res_id);
-  sqlite3_bind_int64(st, 3, stored_at);
-  sqlite3_bind_blob64(st, 4, result.positions.data(), result.positions.size() * sizeof(Vec3), SQLITE_STATIC);
-  sqlite3_bind_text64(st, 5, request.data(), request.size(), SQLITE_STATIC, SQLITE_UTF8);
-  sqlite3_bind_blob(st, 6, stats.data(), static_cast<int>(stats.size()), SQLITE_STATIC);
-  if (result.holds) sqlite3_bind_blob64(st, 7, holds.data(), holds.size(), SQLITE_STATIC);
-  const std::string_view holds_view(holds);
-  const std::string_view positions(reinterpret_cast<const char*>(result.positions.data()),
-                                   result.positions.size() * sizeof(Vec3));
-  sqlite3_bind_int64(st, 8, record_checksum(result.res_id, stored_at, positions, request, stats,
-                                            result.holds ? &holds_view : nullptr));
-  if (sqlite3_step(st) != SQLITE_DONE) {
-    return failure("written (result " + std::to_string(result.res_id) + " of geometry " + id.hex() + ")");
-  }
-  return {};
+  return timed([&]() -> Result<void> {
+    const std::string request = wire::encode_request_json(result.request);
+    const std::string stats = encode_stats(result);
+    const std::string holds = result.holds ? encode_holds(*result.holds) : std::string();
+    const int64_t stored_at =
+        std::chrono::duration_cast<std::chrono::nanoseconds>(result.stored_at.time_since_epoch()).count();
+    std::lock_guard lock(mu_);
+    auto seq = seq_of(id);
+    if (!seq) return seq.error();
+    Reset reset{insert_result_};
+    sqlite3_stmt* st = insert_result_;
+    sqlite3_bind_int64(st, 1, *seq);
+    sqlite3_bind_int64(st, 2, result.res_id);
+    sqlite3_bind_int64(st, 3, stored_at);
+    sqlite3_bind_blob64(st, 4, result.positions.data(), result.positions.size() * sizeof(Vec3), SQLITE_STATIC);
+    sqlite3_bind_text64(st, 5, request.data(), request.size(), SQLITE_STATIC, SQLITE_UTF8);
+    sqlite3_bind_blob(st, 6, stats.data(), static_cast<int>(stats.size()), SQLITE_STATIC);
+    if (result.holds) sqlite3_bind_blob64(st, 7, holds.data(), holds.size(), SQLITE_STATIC);
+    const std::string_view holds_view(holds);
+    const std::string_view positions(reinterpret_cast<const char*>(result.positions.data()),
+                                     result.positions.size() * sizeof(Vec3));
+    sqlite3_bind_int64(st, 8, record_checksum(result.res_id, stored_at, positions, request, stats,
+                                              result.holds ? &holds_view : nullptr));
+    if (sqlite3_step(st) != SQLITE_DONE) {
+      return failure("written (result " + std::to_string(result.res_id) + " of geometry " + id.hex() + ")");
+    }
+    return {};
+  });
 }
 
-Result<void> PersistentStore::delete_geometry(const GeomId& id) {
-  std::lock_guard lock(mu_);
-  auto seq = seq_of(id);
-  if (!seq) return seq.error().code == ErrorCode::kNotFound ? Result<void>() : Result<void>(seq.error());
-  if (auto ok = exec("BEGIN"); !ok) return ok;
-  bool ok = true;
-  for (sqlite3_stmt* st : {delete_results_, delete_geometry_}) {
-    Reset reset{st};
-    sqlite3_bind_int64(st, 1, *seq);
-    ok = ok && sqlite3_step(st) == SQLITE_DONE;
-  }
-  if (!ok) {
-    Error err = failure("written (deleting geometry " + id.hex() + ")");
-    (void)exec("ROLLBACK");
-    return err;
-  }
-  return exec("COMMIT");
+Result<void> PersistentStore::delete_geometry(const DeletedGeometry& deleted) {
+  return timed([&]() -> Result<void> {
+    const GeomId& id = deleted.id;
+    const std::string holds = encode_holds(deleted.hold_versions);
+    std::lock_guard lock(mu_);
+    auto seq = seq_of(id);
+    if (!seq && seq.error().code != ErrorCode::kNotFound) return seq.error();
+    if (auto ok = exec("BEGIN"); !ok) return ok;
+    bool ok = true;
+    if (seq) {
+      for (sqlite3_stmt* st : {delete_results_, delete_geometry_}) {
+        Reset reset{st};
+        sqlite3_bind_int64(st, 1, *seq);
+        ok = ok && sqlite3_step(st) == SQLITE_DONE;
+      }
+    }
+    if (ok) {
+      Reset reset{insert_deleted_};
+      sqlite3_bind_blob(insert_deleted_, 1, id.bytes.data(), static_cast<int>(id.bytes.size()), SQLITE_STATIC);
+      sqlite3_bind_int64(insert_deleted_, 2, deleted.next_res_id);
+      sqlite3_bind_blob(insert_deleted_, 3, holds.data(), static_cast<int>(holds.size()), SQLITE_STATIC);
+      ok = sqlite3_step(insert_deleted_) == SQLITE_DONE;
+    }
+    if (ok) {
+      Reset reset{prune_deleted_};
+      sqlite3_bind_int64(prune_deleted_, 1, static_cast<int64_t>(kMaxDeletedGeometries));
+      ok = sqlite3_step(prune_deleted_) == SQLITE_DONE;
+    }
+    if (!ok) {
+      Error err = failure("written (deleting geometry " + id.hex() + ")");
+      (void)exec("ROLLBACK");
+      return err;
+    }
+    return exec("COMMIT");
+  });
 }
 
 Result<void> PersistentStore::drop_results_through(const GeomId& id, uint32_t res_id) {
-  std::lock_guard lock(mu_);
-  auto seq = seq_of(id);
-  if (!seq) return seq.error();
-  if (auto ok = exec("BEGIN"); !ok) return ok;
-  bool ok = true;
-  for (sqlite3_stmt* st : {drop_results_, set_dropped_}) {
-    Reset reset{st};
-    sqlite3_bind_int64(st, 1, *seq);
-    sqlite3_bind_int64(st, 2, res_id);
-    ok = ok && sqlite3_step(st) == SQLITE_DONE;
-  }
-  if (!ok) {
-    Error err = failure("written (dropping results of geometry " + id.hex() + ")");
-    (void)exec("ROLLBACK");
-    return err;
-  }
-  return exec("COMMIT");
+  return timed([&]() -> Result<void> {
+    std::lock_guard lock(mu_);
+    auto seq = seq_of(id);
+    if (!seq) return seq.error();
+    if (auto ok = exec("BEGIN"); !ok) return ok;
+    bool ok = true;
+    for (sqlite3_stmt* st : {drop_results_, set_dropped_}) {
+      Reset reset{st};
+      sqlite3_bind_int64(st, 1, *seq);
+      sqlite3_bind_int64(st, 2, res_id);
+      ok = ok && sqlite3_step(st) == SQLITE_DONE;
+    }
+    if (!ok) {
+      Error err = failure("written (dropping results of geometry " + id.hex() + ")");
+      (void)exec("ROLLBACK");
+      return err;
+    }
+    return exec("COMMIT");
+  });
 }
 
 Result<std::vector<RestoredGeometry>> PersistentStore::load() {
@@ -544,6 +605,40 @@ Result<std::vector<RestoredGeometry>> PersistentStore::load() {
     }
     if (rc != SQLITE_DONE) return failure("read");
   }
+  return out;
+}
+
+Result<std::vector<DeletedGeometry>> PersistentStore::load_deleted() {
+  std::lock_guard lock(mu_);
+  sqlite3_stmt* raw = nullptr;
+  if (sqlite3_prepare_v2(db_, "SELECT id, next_res_id, holds FROM deleted_geometries ORDER BY seq", -1, &raw,
+                         nullptr) != SQLITE_OK) {
+    return failure("read");
+  }
+  std::unique_ptr<sqlite3_stmt, int (*)(sqlite3_stmt*)> st(raw, &sqlite3_finalize);
+  auto damaged = [&](const std::string& what) -> Error {
+    return Error{ErrorCode::kInvalidArgument, db_path_ + " is damaged: " + what +
+                                                  "; move it away to start with an empty store, or restore it "
+                                                  "from a backup"};
+  };
+  std::vector<DeletedGeometry> out;
+  int rc = 0;
+  while ((rc = sqlite3_step(raw)) == SQLITE_ROW) {
+    DeletedGeometry d;
+    const std::string_view id = column_bytes(raw, 0);
+    if (id.size() != d.id.bytes.size()) {
+      return damaged("a deleted geometry's id is " + std::to_string(id.size()) + " bytes long");
+    }
+    std::memcpy(d.id.bytes.data(), id.data(), id.size());
+    const int64_t next = sqlite3_column_int64(raw, 1);
+    if (next < 1 || next > UINT32_MAX) return damaged("deleted geometry " + d.id.hex() + " has a bad next result id");
+    d.next_res_id = static_cast<uint32_t>(next);
+    if (!decode_holds(column_bytes(raw, 2), d.hold_versions)) {
+      return damaged("deleted geometry " + d.id.hex() + ": its hold versions do not decode");
+    }
+    out.push_back(std::move(d));
+  }
+  if (rc != SQLITE_DONE) return failure("read");
   return out;
 }
 

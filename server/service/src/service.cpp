@@ -1,5 +1,5 @@
 // Service: uploads, precomputation, deformations, the result history, long polls, stresses and limit
-// combinations (holds, subscriptions and metrics have their own files). (About 800 lines: the
+// combinations (holds, subscriptions and metrics have their own files). (About 900 lines: the
 // geometry lifecycle, upload to delete, the result history with its retention, and the solve path
 // share the Impl helpers defined here.)
 #include "softshell/service/service.h"
@@ -498,18 +498,21 @@ Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& m
                        megabytes(impl_->budget.used()) + " in use) cannot hold this geometry (about " +
                        megabytes(bytes) + " with its precomputation); geometries are never dropped to make room"};
     }
+    auto dead = impl_->deleted.find(id);
+    const uint32_t first_res_id = dead != impl_->deleted.end() ? dead->second.next_res_id : 1;
     if (impl_->persistent) {
-      if (auto saved = impl_->persistent->save_geometry(id, *entry->geometry); !saved) {
+      if (auto saved = impl_->persistent->save_geometry(id, *entry->geometry, first_res_id); !saved) {
         impl_->budget.release(bytes);
         return saved.error();
       }
     }
-    if (auto dead = impl_->deleted.find(id); dead != impl_->deleted.end()) {
+    if (dead != impl_->deleted.end()) {
       // The same content uploaded again after a delete: a new life whose ids continue the old ones.
-      entry->first_kept = entry->first_of_life = dead->second.next_res_id;
-      entry->notified = dead->second.next_res_id - 1;
+      entry->first_kept = entry->first_of_life = first_res_id;
+      entry->notified = first_res_id - 1;
       impl_->budget.release(dead->second.bytes());
       entry->holds.retired = std::move(dead->second.hold_versions);
+      impl_->deleted_order.erase(dead->second.seq);
       impl_->deleted.erase(dead);
     }
     impl_->by_id.emplace(id, entry);
@@ -517,6 +520,19 @@ Result<UploadResult> Service::upload_checked(ControlMesh mesh, const Material& m
   }
   impl_->start_precompute(entry);
   return UploadResult{id, true, GeometryStatus::kPrecomputing};
+}
+
+void Service::Impl::remember_deleted_locked(const GeomId& id, Tombstone dead) {
+  dead.seq = next_deleted_seq++;
+  budget.resize(0, dead.bytes());  // small and never refused: a delete always goes through
+  deleted_order.emplace(dead.seq, id);
+  deleted[id] = std::move(dead);
+  while (deleted.size() > PersistentStore::kMaxDeletedGeometries) {
+    auto oldest = deleted.find(deleted_order.begin()->second);
+    budget.release(oldest->second.bytes());
+    deleted.erase(oldest);
+    deleted_order.erase(deleted_order.begin());
+  }
 }
 
 Result<void> Service::remove(const GeomId& id) {
@@ -530,26 +546,28 @@ Result<void> Service::remove(const GeomId& id) {
     std::unique_lock registry(impl_->registry_mu);
     auto it = impl_->by_id.find(id);
     if (it == impl_->by_id.end()) return not_found(id);
-    // Off the disk first: a geometry whose delete was answered must not come back at a restart.
-    if (impl_->persistent) {
-      if (auto gone = impl_->persistent->delete_geometry(id); !gone) return gone.error();
-    }
     e = it->second;
-    impl_->by_id.erase(it);
-    auto& order = impl_->in_order;
-    order.erase(std::remove(order.begin(), order.end(), e), order.end());
-
     std::lock_guard lock(e->mu);
-    e->deleted = true;
-    e->cancel.store(true);  // a running precomputation stops at its next check
     // What the next upload of this content continues from (registered with the removal, under
     // the registry lock, so that an upload sees either the geometry or its tombstone).
     Tombstone dead;
     dead.next_res_id = e->next_res_id();
     dead.hold_versions = e->holds.retired;
     for (const auto& [hold_id, h] : e->holds.live) dead.hold_versions[hold_id] = h.next_version;
-    impl_->budget.resize(0, dead.bytes());  // small and never refused: a delete always goes through
-    impl_->deleted[id] = std::move(dead);
+    // Off the disk first, with its tombstone: a geometry whose delete was answered must not come
+    // back at a restart, nor its next upload reuse its ids. (Under e->mu: no result is stored
+    // meanwhile, so the tombstone's next id is still the next one.)
+    if (impl_->persistent) {
+      DeletedGeometry record{id, dead.next_res_id, {dead.hold_versions.begin(), dead.hold_versions.end()}};
+      if (auto gone = impl_->persistent->delete_geometry(record); !gone) return gone.error();
+    }
+    impl_->by_id.erase(it);
+    auto& order = impl_->in_order;
+    order.erase(std::remove(order.begin(), order.end(), e), order.end());
+
+    e->deleted = true;
+    e->cancel.store(true);  // a running precomputation stops at its next check
+    impl_->remember_deleted_locked(id, std::move(dead));
 
     pending.swap(e->pending);
     listeners.swap(e->listeners);
@@ -873,6 +891,14 @@ ServiceStats Service::stats() const {
   s.leases_expired = impl_->leases_expired.load();
   s.followers = impl_->followers.load();
   s.hold_solve_seconds = impl_->hold_solve_hist.snapshot();
+  if (impl_->persistent) {
+    const internal::PersistentStore::WriteStats w = impl_->persistent->write_stats();
+    s.data_dir = true;
+    s.data_dir_bytes = impl_->persistent->disk_bytes();
+    s.data_dir_writes = w.writes;
+    s.data_dir_write_failures = w.failures;
+    s.data_dir_write_seconds = w.seconds;
+  }
   return s;
 }
 

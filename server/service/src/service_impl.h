@@ -114,6 +114,7 @@ struct ListenerSlot {
 // What a deleted geometry leaves behind, so that an upload of the same content continues its
 // ids (results and hold versions) instead of reusing them.
 struct Tombstone {
+  uint64_t seq = 0;  // deletion order (Service::Impl::deleted_order)
   uint32_t next_res_id = 1;
   std::map<std::string, uint64_t, std::less<>> hold_versions;  // next version per hold id
   size_t bytes() const {
@@ -226,7 +227,13 @@ struct Service::Impl {
   mutable std::shared_mutex registry_mu;
   std::unordered_map<GeomId, std::shared_ptr<Entry>, internal::GeomIdHash> by_id;
   std::vector<std::shared_ptr<Entry>> in_order;
-  std::unordered_map<GeomId, internal::Tombstone, internal::GeomIdHash> deleted;  // by content id
+  // Deleted geometries by content id, and by deletion order (guarded by registry_mu). Bounded as
+  // the persistent store's table is (PersistentStore::kMaxDeletedGeometries): the oldest goes.
+  std::unordered_map<GeomId, internal::Tombstone, internal::GeomIdHash> deleted;
+  std::map<uint64_t, GeomId> deleted_order;
+  uint64_t next_deleted_seq = 1;
+  // Registers a tombstone (caller holds registry_mu exclusively; counts it against the budget).
+  void remember_deleted_locked(const GeomId& id, internal::Tombstone dead);
 
   std::atomic<bool> stopping{false};
   std::mutex shutdown_mu;

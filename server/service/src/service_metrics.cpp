@@ -67,6 +67,21 @@ std::string Service::metrics_text() const {
         d(s.followers));
   m.family("softshell_hold_solve_duration_seconds", "histogram", "Time of each hold-state solve (a batch of changes).");
   m.histogram("softshell_hold_solve_duration_seconds", "", s.hold_solve_seconds);
+
+  // Only with a data directory (--data-dir): a server in memory has no store to report.
+  if (s.data_dir) {
+    gauge("softshell_data_dir_bytes", "Bytes of the data directory's store on disk (database and write-ahead log).",
+          d(s.data_dir_bytes));
+    counter("softshell_data_dir_writes_total",
+            "Write transactions committed to the data directory (uploads, results, deletes, retention).",
+            d(s.data_dir_writes));
+    counter("softshell_data_dir_write_failures_total",
+            "Write transactions to the data directory that failed (disk full, I/O errors; answered 507 or logged).",
+            d(s.data_dir_write_failures));
+    m.family("softshell_data_dir_write_duration_seconds", "histogram",
+             "Time of each write transaction to the data directory, committed or failed.");
+    m.histogram("softshell_data_dir_write_duration_seconds", "", s.data_dir_write_seconds);
+  }
   return m.take();
 }
 

@@ -75,8 +75,9 @@ SS_API uint32_t ss_version_number(void);
 /** The ABI version this header describes; compare with `ss_abi_version()` at load time and refuse
  *  a library with another one (struct layouts or signatures differ). 2: generation-checked
  *  handles, blittable ss_embedded_options, geometry status, presets, limit_comb, log callback.
- *  3: ss_remote_options.auth_token. */
-#define SS_ABI_VERSION 3u
+ *  3: ss_remote_options.auth_token. 4: ss_session_remove_geometry; ss_embedded_options gains
+ *  keep_results, result_budget_mb and data_dir (96 bytes on 64-bit platforms, was 80). */
+#define SS_ABI_VERSION 4u
 /** The ABI version of the loaded library. */
 SS_API uint32_t ss_abi_version(void);
 
@@ -465,6 +466,12 @@ SS_API ss_status ss_geom_id_to_hex(const ss_geom_id* id, char* out, int32_t capa
  *  a new geometry, 0 if it existed. Blocks until the server answered (not for the precomputation). */
 SS_API ss_status ss_session_upload(ss_session* session, const ss_mesh* mesh, const ss_material* material,
                                    const char* name_space, ss_geom_id* out_id, int32_t* out_created);
+/** Deletes a geometry and everything kept for it: its results, holds and precomputed model
+ *  (`DELETE /geometries/{id}`). Operations waiting on it end with SS_GONE; later calls for the id
+ *  are SS_NOT_FOUND until the same content is uploaded again, whose result ids then continue
+ *  after the deleted ones (asking for those is SS_GONE). SS_NOT_FOUND for an unknown geometry.
+ *  Blocks for one request. */
+SS_API ss_status ss_session_remove_geometry(ss_session* session, const ss_geom_id* id);
 /** Solves and stores a deformation; blocks. Deformed control points (items: xyz; capacity must be
  *  at least the mesh's vertex count). */
 SS_API ss_status ss_session_deform(ss_session* session, const ss_geom_id* id, const ss_request* request,

@@ -124,6 +124,13 @@ class Session {
   /// an extension).
   virtual Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) = 0;
 
+  /// Deletes a geometry and everything kept for it (`DELETE /geometries/{id}`, an extension):
+  /// its results, holds and precomputed model. Calls waiting on it are answered kGone; later
+  /// calls for the id are kNotFound until the same content is uploaded again, whose result ids
+  /// then continue after the deleted ones (which stay kGone). kNotFound for an unknown geometry.
+  /// (Not pure: a session without it, such as a test double, refuses it with kUnavailable.)
+  virtual Result<void> remove_geometry(const GeomId& id);
+
   // --- holds and events (PROTOCOL.md version 2) ---------------------------------------------
   // (Not pure: a session without them, such as a test double, refuses them with kUnavailable.)
 

@@ -92,6 +92,7 @@ class RemoteSession final : public Session {
                                                          std::chrono::milliseconds wait) override;
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) override;
   Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) override;
+  Result<void> remove_geometry(const GeomId& id) override;
 
   // Holds (`PUT/DELETE/GET .../holds`): bodies in the preferred format, answers always in JSON
   // (only JSON carries the hold versions; positions then have full precision). A PUT waits up to

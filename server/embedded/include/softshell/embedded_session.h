@@ -63,6 +63,7 @@ class EmbeddedSession final : public Session {
                                                          std::chrono::milliseconds wait) override;
   Result<LimitComb> limit_comb(const GeomId& id, const SurfacePoint& point) override;
   Result<StressField> stresses(const GeomId& id, uint32_t res_id, const StressQuery& query) override;
+  Result<void> remove_geometry(const GeomId& id) override;
 
   // Holds and events: the service's own (`put_hold_async` waits for an unanswered change on a
   // small pool of the session's, one thread, started on first use; `subscribe` is a service

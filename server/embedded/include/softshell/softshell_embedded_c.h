@@ -29,8 +29,9 @@ extern "C" {
 /** Capacity of ss_embedded_options.http_host, the terminating NUL included. */
 #define SS_HOST_CAPACITY 64
 
-/** Options of the in-process server. Blittable: fixed-size plain fields only (80 bytes; C#
- *  declares the host as `fixed byte http_host[64]`), so it crosses P/Invoke without marshalling. */
+/** Options of the in-process server. Blittable: fixed-size plain fields and one pointer (96 bytes
+ *  on 64-bit platforms, 92 on 32-bit; C# declares the host as `fixed byte http_host[64]` and
+ *  data_dir as an IntPtr), so it crosses P/Invoke without marshalling. */
 typedef struct ss_embedded_options {
   int32_t worker_threads;  /* precomputation / solve threads; 0: the number of cores */
   int32_t cache_mb;        /* memory budget of cached factorizations in MiB; 0: the server default */
@@ -38,10 +39,21 @@ typedef struct ss_embedded_options {
   int32_t http_port;       /* port of the listener; 0: any free port (ss_session_embedded_port) */
   char http_host[SS_HOST_CAPACITY]; /* NUL-terminated address to listen on; default "127.0.0.1",
                                        "0.0.0.0" for every interface */
+  int32_t keep_results;     /* results kept per geometry, the newest (older ones are SS_GONE); 0: the
+                               server default (1000), -1: no count limit (softshell-server
+                               --keep-results) */
+  int32_t result_budget_mb; /* MiB of results kept per geometry; 0: no byte limit (the default;
+                               --result-budget-mb) */
+  const char* data_dir;     /* NUL-terminated directory of a persistent store (created if missing;
+                               softshell-server --data-dir), copied in: geometries and results are
+                               written there before they are answered, and a later session on the
+                               same directory restores them. One session at a time holds a
+                               directory (SS_UNAVAILABLE otherwise); a damaged or foreign store is
+                               SS_INVALID_ARGUMENT, naming it. NULL or "": memory only (default) */
 } ss_embedded_options;
 
-/** Writes the defaults (no listener, server defaults, host "127.0.0.1") into `*out` (no-op for
- *  NULL). */
+/** Writes the defaults (no listener, server defaults, host "127.0.0.1", no data directory) into
+ *  `*out` (no-op for NULL). */
 SS_EMBEDDED_API void ss_embedded_options_default(ss_embedded_options* out);
 
 /** Starts an in-process server and returns a session on it (`options` NULL: defaults). Destroy it

@@ -167,6 +167,12 @@ struct ServiceStats {
   uint64_t leases_expired = 0;          ///< holds released because their lease lapsed
   size_t followers = 0;                 ///< followers counted by subscriptions (event streams)
   Histogram::Snapshot hold_solve_seconds;  ///< time of each hold-state solve (batch)
+  // The persistent store (`ServiceOptions::data_dir`); zeros without one.
+  bool data_dir = false;                ///< the service has a persistent store
+  size_t data_dir_bytes = 0;            ///< its database and write-ahead log on disk
+  uint64_t data_dir_writes = 0;         ///< write transactions committed (uploads, results, deletes, retention)
+  uint64_t data_dir_write_failures = 0; ///< write transactions that failed (disk full, I/O errors)
+  Histogram::Snapshot data_dir_write_seconds;  ///< time of each write transaction, committed or failed
 };
 
 /// A change of a hold (`Service::put_hold`).
@@ -272,7 +278,10 @@ class Service {
   /// holds), but its result ids continue after the deleted one's last id (the service remembers
   /// the last id and hold versions of a deleted geometry, about 100 bytes each), so that no
   /// client that cached (geometry, res_id) pairs or holds a `have` can take an old result for a
-  /// new one.
+  /// new one. With a data directory this is written in the delete's transaction and restored by
+  /// the next service on the directory. The newest 16,384 deletes are remembered; past that the
+  /// oldest is forgotten (its content uploaded again starts at id 1). A failed write is
+  /// kResourceExhausted and deletes nothing.
   Result<void> remove(const GeomId& id);
 
   /// Every geometry, in upload order.
