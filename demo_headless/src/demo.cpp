@@ -54,7 +54,7 @@ void load(Context& c) {
 // The server: in-process with an HTTP listener for the follower, or a remote one.
 void connect(Context& c) {
   if (c.options.server_url.empty()) {
-    auto embedded = std::make_shared<EmbeddedSession>();
+    auto embedded = std::make_shared<EmbeddedSession>(c.options.embedded);
     const int port = embedded->listen("127.0.0.1", 0).value();
     c.follower_url = "http://127.0.0.1:" + std::to_string(port);
     c.session = embedded;

@@ -11,6 +11,7 @@
 #include "softshell/hold.h"
 #include "softshell/material.h"
 #include "softshell/result.h"
+#include "softshell/service/service.h"
 
 namespace softshell::demo {
 
@@ -19,6 +20,8 @@ struct DemoOptions {
   Material material = material_preset("rubber", 0.01).value();  ///< SI units, the mesh's unit is metres
   std::string material_name = "rubber";  ///< a preset's name gives its yield strength
   std::string server_url;                ///< empty = embedded server (with an HTTP listener for the follower)
+  /// The embedded server's options (its limits, the nonlinear solver's); unused with `server_url`.
+  service::ServiceOptions embedded;
   std::filesystem::path out_dir = "demo-out";
   int level = 3;                         ///< tessellation level for picking, rendering and the OBJ
   int deformations = 120;                ///< at least this many push/pull deformations (>= 10)

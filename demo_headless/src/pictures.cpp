@@ -235,6 +235,13 @@ void draw_large_pull(Context& c, Tessellation& t, const LargePull& pull) {
   for (size_t k = 0; k < panels.size(); ++k) {
     const Panel& p = panels[k];
     Renderer r(w, h, camera);
+    const auto draw_hand = [&] {
+      TriMesh marks;
+      marks.append(sphere(pull.hand.position, 0.03 * st.size, kHand));
+      marks.append(tube(pull.hand.position, pull.hand.point, 0.004 * st.size, kHand));
+      marks.append(sphere(pull.hand.point, 0.01 * st.size, kForce));
+      r.draw(marks.shaded());
+    };
     draw_ground(r, st, b);
     int y = 14;
     if (!p.answer->positions.empty()) {
@@ -242,22 +249,20 @@ void draw_large_pull(Context& c, Tessellation& t, const LargePull& pull) {
       ShadedMesh m{&p.vertices, &p.normals, &t.triangles(), &p.shape.field, 0.0, max_u};
       r.draw(m);
       draw_supports(r, st);
-      TriMesh marks;
-      marks.append(sphere(pull.hand.position, 0.03 * st.size, kHand));
-      marks.append(tube(pull.hand.position, pull.hand.point, 0.004 * st.size, kHand));
-      marks.append(sphere(pull.hand.point, 0.01 * st.size, kForce));
-      r.draw(marks.shaded());
+      draw_hand();
       draw_ghost(r, *c.view, st.size);
       y = r.paragraph(14, y, p.name, kInk, 3, w - 110);
       const double change = 100.0 * (p.answer->area_ratio - 1.0);
-      r.paragraph(14, y + 4, "surface area " + format("%.3g", p.answer->area_ratio) + " times the rest area (" +
+      r.paragraph(14, y + 4, "surface area " + format("%.3g", p.answer->area_ratio) + " x rest (" +
                                  format(change >= 0.0 ? "+%.1f%%" : "%.1f%%", change) + ")",
-                  kInk, 1, w - 110);
+                  kInk, 2, w - 110);
     } else {
       draw_supports(r, st);
+      draw_hand();  // where the request asked the point to go
       draw_ghost(r, *c.view, st.size);
       y = r.paragraph(14, y, p.name, kInk, 3, w - 110);
-      r.paragraph(14, y + 4, "refused by the server: " + p.answer->refused, kForce, 1, w - 110);
+      y = r.paragraph(14, y + 4, "refused by the server:", kForce, 2, w - 110);
+      r.paragraph(14, y + 4, p.answer->refused, kForce, 1, w - 110);
     }
     if (k == 1) r.colour_bar("|u|", 0.0, max_u, "m");
     whole.paste(r, static_cast<int>(k) * w, 0);
