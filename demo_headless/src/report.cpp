@@ -54,7 +54,8 @@ std::string format_summary(const DemoReport& r) {
   if (!r.loads.box_masses.empty()) s << ", boxes of " << masses(r.loads.box_masses);
   s << " (scaled to stay inside the linear model's range)\n";
   s << "  deformations         " << r.deformations << " (" << r.probes
-    << " calibration probes; grab, push, tangent grab, two hands; supports held)\n"
+    << " calibration probes; grab, push, tangent grab, " << (r.large_pull.ran ? "large pull, " : "")
+    << "two hands; supports held)\n"
     << "  latency per request  p50 " << format("%.2f", r.latency_p50_ms) << " ms, p95 " << format("%.2f", r.latency_p95_ms)
     << " ms, max " << format("%.2f", r.latency_max_ms) << " ms   (paper: 2-75 ms solve, 1-5 frames = up to 83 ms end to end)\n"
     << "  follower             ";
