@@ -10,22 +10,28 @@ void Context::say(const std::string& line) const {
   if (options.progress) options.progress(line);
 }
 
-DeformationResult Context::deform(const DeformationRequest& extra, const std::string& phase) {
+Result<DeformationResult> Context::solve(const DeformationRequest& extra, DeformationModel with) {
   DeformationRequest request = extra;
-  request.model = model;
+  request.model = with;
   const DeformationRequest& s = stage.supports;
   request.vertex_constraints.insert(request.vertex_constraints.end(), s.vertex_constraints.begin(), s.vertex_constraints.end());
   request.lagrange_constraints.insert(request.lagrange_constraints.end(), s.lagrange_constraints.begin(),
                                       s.lagrange_constraints.end());
   request.limit_constraints.insert(request.limit_constraints.end(), s.limit_constraints.begin(), s.limit_constraints.end());
-  const auto start = Clock::now();
-  DeformationResult result = session->deform(id, request).value();
-  latencies.push_back(ms_between(start, Clock::now()));
-  timeline.stored(result.res_id);
-  report.last_res_id = std::max(report.last_res_id, result.res_id);
+  auto result = session->deform(id, request);
+  if (!result) return result.error();
+  timeline.stored(result->res_id);
+  report.last_res_id = std::max(report.last_res_id, result->res_id);
   ++report.deformations;
-  shown = result.positions;
-  view->show(result.positions);
+  shown = result->positions;
+  view->show(result->positions);
+  return result;
+}
+
+DeformationResult Context::deform(const DeformationRequest& extra, const std::string& phase) {
+  const auto start = Clock::now();
+  DeformationResult result = solve(extra, model).value();
+  latencies.push_back(ms_between(start, Clock::now()));
   Response r = measure_shape(view->surface, view->rest_vertices, view->rest_normals);
   r.res_id = result.res_id;
   range.observe(phase, r);

@@ -40,6 +40,20 @@ struct Snapshot {
   std::vector<Body> bodies;
 };
 
+/// One large pull solved with both models (the same request), for the side-by-side picture.
+struct LargePull {
+  Snapshot::Hand hand;                 ///< the hand where it pulls to, and the point it holds
+  double distance = 0.0;               ///< m, how far the hand moved
+  std::string caption;                 ///< what was pulled, where to
+  struct Answer {
+    std::vector<Vec3> positions;       ///< control points (empty: refused)
+    std::string refused;               ///< the server's message when it refused the request
+    double area_ratio = 0.0;           ///< limit surface area over the rest one (level-N tessellation)
+    int iterations = 0;                ///< Newton iterations (nonlinear)
+    double ms = 0.0;                   ///< time to the answer
+  } linear, nonlinear;
+};
+
 struct Context {
   Context(const DemoOptions& o, DemoReport& r) : options(o), report(r) {}
 
@@ -57,11 +71,16 @@ struct Context {
   std::vector<double> latencies;       ///< ms per request
   std::vector<Vec3> shown;             ///< control points of the newest result
   std::vector<Snapshot> snapshots;
+  std::optional<LargePull> large_pull;  ///< the side-by-side comparison, if it ran
   int per_phase = 0;                   ///< steps of each scripted phase
   /// The model `deform` solves with (set per phase by `calibrate`; probes are linear).
   DeformationModel model = DeformationModel::kLinear;
 
   void say(const std::string& line) const;
+  /// Solves `extra` together with the supports with the model `with`, and shows the result; the
+  /// server's error if it refuses. Records it for the follower but not in the latencies or the
+  /// range checks (see `deform`).
+  Result<DeformationResult> solve(const DeformationRequest& extra, DeformationModel with);
   /// Solves `extra` together with the supports, shows the result and records it under `phase`.
   DeformationResult deform(const DeformationRequest& extra, const std::string& phase);
   /// A probe for `phase`: solves it, measures it (stresses included, if the server has them) and

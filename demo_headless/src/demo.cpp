@@ -54,7 +54,7 @@ void load(Context& c) {
 // The server: in-process with an HTTP listener for the follower, or a remote one.
 void connect(Context& c) {
   if (c.options.server_url.empty()) {
-    auto embedded = std::make_shared<EmbeddedSession>();
+    auto embedded = std::make_shared<EmbeddedSession>(c.options.embedded);
     const int port = embedded->listen("127.0.0.1", 0).value();
     c.follower_url = "http://127.0.0.1:" + std::to_string(port);
     c.session = embedded;
@@ -159,6 +159,9 @@ Result<DemoReport> run_demo(const DemoOptions& options) {
     if (options.deformations < 10 && !options.short_script) {
       fail(ErrorCode::kInvalidArgument, "--deformations must be at least 10");
     }
+    if (!(options.large_pull_per_size > 0.0) || !std::isfinite(options.large_pull_per_size)) {
+      fail(ErrorCode::kInvalidArgument, "the large pull must be a positive fraction of the object's size");
+    }
     if (options.users != 1 && options.users != 2) fail(ErrorCode::kInvalidArgument, "--users is 1 or 2");
     if (!(options.load_scale > 0.0) || !std::isfinite(options.load_scale)) {
       fail(ErrorCode::kInvalidArgument, "--load-scale must be a positive number");
@@ -176,6 +179,7 @@ Result<DemoReport> run_demo(const DemoOptions& options) {
     grab_phase(c);
     push_phase(c);
     twist_phase(c);
+    if (options.pictures && options.large_pull) large_pull_phase(c);  // before the held final state
     two_hands_phase(c);
     report.latency_p50_ms = percentile(c.latencies, 0.5);
     report.latency_p95_ms = percentile(c.latencies, 0.95);

@@ -11,6 +11,7 @@
 #include "softshell/hold.h"
 #include "softshell/material.h"
 #include "softshell/result.h"
+#include "softshell/service/service.h"
 
 namespace softshell::demo {
 
@@ -19,6 +20,8 @@ struct DemoOptions {
   Material material = material_preset("rubber", 0.01).value();  ///< SI units, the mesh's unit is metres
   std::string material_name = "rubber";  ///< a preset's name gives its yield strength
   std::string server_url;                ///< empty = embedded server (with an HTTP listener for the follower)
+  /// The embedded server's options (its limits, the nonlinear solver's); unused with `server_url`.
+  service::ServiceOptions embedded;
   std::filesystem::path out_dir = "demo-out";
   int level = 3;                         ///< tessellation level for picking, rendering and the OBJ
   int deformations = 120;                ///< at least this many push/pull deformations (>= 10)
@@ -42,6 +45,10 @@ struct DemoOptions {
   bool bullet = true;                    ///< drop rigid bodies through the Bullet bridge
   int bullet_steps = 240;                ///< Bullet steps at 1/60 s
   bool pictures = true;                  ///< write PNGs
+  /// With `pictures`: one large pull (the grab's point pulled by `large_pull_per_size` of the
+  /// object's size, the supports held) solved with both models, drawn side by side.
+  bool large_pull = true;
+  double large_pull_per_size = 0.4;
   int picture_width = 800, picture_height = 600;
   std::function<void(const std::string&)> progress;  ///< progress lines (stderr), may be empty
 };
@@ -121,6 +128,18 @@ struct DemoReport {
     std::optional<double> max_strain;    ///< von Mises stress / E
     bool exceeds_yield = false;
   } final;
+  /// One large pull solved with both models (`DemoOptions::large_pull`): how much each stretched
+  /// the surface.
+  struct LargePull {
+    bool ran = false;
+    double distance = 0.0;               ///< m, how far the hand pulled
+    double per_size = 0.0;               ///< distance over the object's size
+    double linear_area_ratio = 0.0;      ///< deformed limit surface area over the rest one
+    std::optional<double> nonlinear_area_ratio;  ///< empty if the server refused the nonlinear solve
+    std::string nonlinear_refused;       ///< the server's message if it did
+    int nonlinear_iterations = 0;
+    double linear_ms = 0.0, nonlinear_ms = 0.0;  ///< time to each answer
+  } large_pull;
   /// The scripted phases solved with the nonlinear model (in script order).
   std::vector<std::string> nonlinear_phases;
   /// A result left the linear model's range: what, where and what to do (also on stderr).

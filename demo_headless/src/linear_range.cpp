@@ -42,6 +42,15 @@ Response measure_shape(const Tessellation& shown, const std::vector<Vec3>& rest_
   return r;
 }
 
+double surface_area(const std::vector<Vec3>& vertices, const std::vector<std::array<int32_t, 3>>& triangles) {
+  double area = 0.0;
+  for (const auto& t : triangles) {
+    const Vec3& a = vertices[static_cast<size_t>(t[0])];
+    area += 0.5 * (vertices[static_cast<size_t>(t[1])] - a).cross(vertices[static_cast<size_t>(t[2])] - a).norm();
+  }
+  return area;
+}
+
 double scale_to_aims(const Response& probe, double size, const Material& material, double yield) {
   using L = LinearRange;
   double scale = std::numeric_limits<double>::infinity();

@@ -10,6 +10,8 @@
 // deflections below the thickness, then the shell also stretches, stiffens or snaps through).
 // Strains of a few per cent and stresses above yield leave the linear elastic material itself.
 
+#include <array>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -54,6 +56,9 @@ struct LinearRange {
 /// Displacement and rotation of the shape `shown` against the rest shape (same tessellation).
 Response measure_shape(const Tessellation& shown, const std::vector<Vec3>& rest_vertices,
                        const std::vector<Vec3>& rest_normals);
+
+/// The area of a triangulated surface (e.g. a tessellation of the limit surface).
+double surface_area(const std::vector<Vec3>& vertices, const std::vector<std::array<int32_t, 3>>& triangles);
 
 /// The factor by which a probe's loads may be multiplied (the model is linear) to bring its
 /// response to the aims. `yield` in Pa, 0 = unknown.

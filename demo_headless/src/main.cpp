@@ -23,7 +23,8 @@ constexpr const char* kDescription =
     "the object: its size, its up axis, how it rests (on the floor, or pinned where it cannot rest),\n"
     "where a hand can reach it, and loads scaled to the material so that every result stays inside\n"
     "the linear model's range (a warning says when one does not). A second client follows through\n"
-    "latest_result. Writes OBJs and PNGs and prints a summary.\n\n"
+    "latest_result. One large pull is solved with both models, linear and nonlinear, and drawn side\n"
+    "by side. Writes OBJs and PNGs and prints a summary.\n\n"
     "Options take their value as --opt value or --opt=value.\n";
 
 constexpr const char* kFooter =
@@ -37,6 +38,7 @@ struct Args {
   double thickness = 0.01;  // a 1 cm rubber skin (an inflatable toy)
   std::string up;
   std::string model;  // empty: chosen per phase
+  double large_pull = 0.4;  // of the object's size; 0 = none
   bool quiet = false, json = false, no_bullet = false, no_follower = false, no_pictures = false;
 };
 
@@ -72,6 +74,9 @@ void add_options(CLI::App& app, Args& a) {
   app.add_flag("--no-bullet", a.no_bullet, "skip the Bullet boxes");
   app.add_flag("--no-follower", a.no_follower, "skip the second client");
   app.add_flag("--no-pictures", a.no_pictures, "skip the PNGs");
+  app.add_option("--large-pull", a.large_pull,
+                 "with pictures: one large pull, the hand moved by F times the object's size,\nsolved with both models and drawn side by side (default 0.4; 0 skips it)")
+      ->type_name("F")->check(CLI::NonNegativeNumber.description(""));
   app.add_flag("--quiet", a.quiet, "no progress on stderr (warnings still go there)");
   app.add_flag("--json", a.json, "print one JSON object as the last line of stdout");
 }
@@ -136,6 +141,8 @@ int main(int argc, char** argv) {
   a.demo.bullet = !a.no_bullet;
   a.demo.follower = !a.no_follower;
   a.demo.pictures = !a.no_pictures;
+  a.demo.large_pull = a.large_pull > 0.0;
+  if (a.demo.large_pull) a.demo.large_pull_per_size = a.large_pull;
   if (!a.quiet) a.demo.progress = [](const std::string& line) { std::cerr << "softshell-demo: " << line << "\n"; };
 
   auto report = softshell::demo::run_demo(a.demo);

@@ -1,6 +1,7 @@
 #include "pictures.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -205,6 +206,73 @@ void draw_snapshot(Context& c, Tessellation& t, const Snapshot& s) {
   save(c, r, s.file);
 }
 
+// The large pull with both models side by side: one camera framed on both answers (and the rest
+// shape), one colour scale, the rest shape as a ghost in each; a refused solve says so.
+void draw_large_pull(Context& c, Tessellation& t, const LargePull& pull) {
+  const Stage& st = c.stage;
+  struct Panel {
+    const char* name;
+    const LargePull::Answer* answer;
+    Shape shape;
+    std::vector<Vec3> vertices, normals;
+  };
+  std::array<Panel, 2> panels = {Panel{"linear", &pull.linear, {}, {}, {}}, Panel{"nonlinear", &pull.nonlinear, {}, {}, {}}};
+  Bounds b;
+  b.add(c.view->rest_vertices);
+  b.add(pull.hand.position);
+  double max_u = 0.0;
+  for (Panel& p : panels) {
+    if (p.answer->positions.empty()) continue;
+    p.shape = move_to(t, c.view->rest_vertices, c.mesh.positions(), p.answer->positions, st.size);
+    p.vertices = t.vertices();
+    p.normals = t.normals();
+    b.add(p.vertices);
+    max_u = std::max(max_u, p.shape.max_u);
+  }
+  const int w = c.options.picture_width, h = c.options.picture_height;
+  const Camera camera = camera_for(st, b, 1.0);
+  Renderer whole(2 * w, h, camera);
+  for (size_t k = 0; k < panels.size(); ++k) {
+    const Panel& p = panels[k];
+    Renderer r(w, h, camera);
+    const auto draw_hand = [&] {
+      TriMesh marks;
+      marks.append(sphere(pull.hand.position, 0.03 * st.size, kHand));
+      marks.append(tube(pull.hand.position, pull.hand.point, 0.004 * st.size, kHand));
+      marks.append(sphere(pull.hand.point, 0.01 * st.size, kForce));
+      r.draw(marks.shaded());
+    };
+    draw_ground(r, st, b);
+    int y = 14;
+    if (!p.answer->positions.empty()) {
+      // A large pull is drawn as it is (never exaggerated), both panels on the same scale.
+      ShadedMesh m{&p.vertices, &p.normals, &t.triangles(), &p.shape.field, 0.0, max_u};
+      r.draw(m);
+      draw_supports(r, st);
+      draw_hand();
+      draw_ghost(r, *c.view, st.size);
+      y = r.paragraph(14, y, p.name, kInk, 3, w - 110);
+      const double change = 100.0 * (p.answer->area_ratio - 1.0);
+      r.paragraph(14, y + 4, "surface area " + format("%.3g", p.answer->area_ratio) + " x rest (" +
+                                 format(change >= 0.0 ? "+%.1f%%" : "%.1f%%", change) + ")",
+                  kInk, 2, w - 110);
+    } else {
+      draw_supports(r, st);
+      draw_hand();  // where the request asked the point to go
+      draw_ghost(r, *c.view, st.size);
+      y = r.paragraph(14, y, p.name, kInk, 3, w - 110);
+      y = r.paragraph(14, y + 4, "refused by the server:", kForce, 2, w - 110);
+      r.paragraph(14, y + 4, p.answer->refused, kForce, 1, w - 110);
+    }
+    if (k == 1) r.colour_bar("|u|", 0.0, max_u, "m");
+    whole.paste(r, static_cast<int>(k) * w, 0);
+  }
+  whole.paragraph(14, h - 38, pull.caption + "; the same request with each model. Areas of the level-" +
+                                  std::to_string(c.options.level) + " tessellation; the ghost is the rest shape",
+                  kInk, 1, 2 * w - 28);
+  save(c, whole, "large-pull-linear-vs-nonlinear.png");
+}
+
 void draw_before(Context& c) {
   const Stage& st = c.stage;
   Bounds b;
@@ -278,6 +346,7 @@ void write_pictures(Context& c, const Follower* follower, const std::optional<St
   draw_before(c);
   Tessellation t = Tessellation::create(c.view->evaluator, c.options.level).value();
   for (const Snapshot& s : c.snapshots) draw_snapshot(c, t, s);
+  if (c.large_pull) draw_large_pull(c, t, *c.large_pull);
   if (follower && !follower->positions().empty()) draw_follower(c, *follower);
   if (stresses) draw_stresses(c, *stresses, stress_level);
 }

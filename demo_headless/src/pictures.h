@@ -3,7 +3,8 @@
 // supports; each recorded moment (the Bullet boxes labelled by mass, the push with its force, the
 // two hands with the points they hold) on the floor, with the rest shape as a ghost, displacements
 // exaggerated (and labelled so) where they are too small to see, framed on the deformed bounds;
-// the follower's view; the stresses.
+// one large pull with the linear and the nonlinear model side by side; the follower's view; the
+// stresses.
 
 #include <optional>
 

@@ -184,6 +184,19 @@ void Renderer::fill_rect(double x0, double y0, double x1, double y1, const Rgb& 
   }
 }
 
+void Renderer::paste(const Renderer& other, int x, int y) {
+  for (int sy = 0; sy < other.h_; ++sy) {
+    const int ty = y * ss_ + sy;
+    if (ty < 0 || ty >= h_) continue;
+    for (int sx = 0; sx < other.w_; ++sx) {
+      const int tx = x * ss_ + sx;
+      if (tx < 0 || tx >= w_) continue;
+      colour_[static_cast<size_t>(ty * w_ + tx)] = other.colour_[static_cast<size_t>(sy * other.w_ + sx)];
+      depth_[static_cast<size_t>(ty * w_ + tx)] = other.depth_[static_cast<size_t>(sy * other.w_ + sx)];
+    }
+  }
+}
+
 int Renderer::text_width(const std::string& s, int scale) {
   std::string copy = s;
   return stb_easy_font_width(copy.data()) * scale;

@@ -73,6 +73,9 @@ class Renderer {
   int paragraph(int x, int y, const std::string& s, const Rgb& colour, int scale, int max_width);
   /// Text on a light box, centred on (x, y): a label next to something drawn.
   void label(double x, double y, const std::string& s, const Rgb& colour);
+  /// Copies what `other` drew (colours and depths) with its top-left corner at pixel (x, y):
+  /// panels side by side in one picture.
+  void paste(const Renderer& other, int x, int y);
   /// Width in pixels of `s` drawn by `text` at `scale`.
   static int text_width(const std::string& s, int scale);
   int width() const { return w_ / ss_; }

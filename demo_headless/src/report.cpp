@@ -54,7 +54,8 @@ std::string format_summary(const DemoReport& r) {
   if (!r.loads.box_masses.empty()) s << ", boxes of " << masses(r.loads.box_masses);
   s << " (scaled to stay inside the linear model's range)\n";
   s << "  deformations         " << r.deformations << " (" << r.probes
-    << " calibration probes; grab, push, tangent grab, two hands; supports held)\n"
+    << " calibration probes; grab, push, tangent grab, " << (r.large_pull.ran ? "large pull, " : "")
+    << "two hands; supports held)\n"
     << "  latency per request  p50 " << format("%.2f", r.latency_p50_ms) << " ms, p95 " << format("%.2f", r.latency_p95_ms)
     << " ms, max " << format("%.2f", r.latency_max_ms) << " ms   (paper: 2-75 ms solve, 1-5 frames = up to 83 ms end to end)\n"
     << "  follower             ";
@@ -95,6 +96,17 @@ std::string format_summary(const DemoReport& r) {
       << (r.final.exceeds_yield ? ", above yield!)" : ")") << "\n";
   } else {
     s << "unavailable\n";
+  }
+  if (r.large_pull.ran) {
+    const auto& p = r.large_pull;
+    s << "  large pull           " << length(p.distance) << " (" << format("%.0f%%", 100.0 * p.per_size)
+      << " of the size), surface area over rest: linear " << format("%.3g", p.linear_area_ratio) << ", nonlinear ";
+    if (p.nonlinear_area_ratio) {
+      s << format("%.3g", *p.nonlinear_area_ratio) << " (" << p.nonlinear_iterations << " Newton iterations, "
+        << format("%.0f ms", p.nonlinear_ms) << ")\n";
+    } else {
+      s << "refused by the server: " << p.nonlinear_refused << "\n";
+    }
   }
   if (!r.nonlinear_phases.empty()) {
     s << "  nonlinear model      ";
@@ -148,6 +160,12 @@ std::string format_json(const DemoReport& r) {
        {{"max_displacement", r.final.max_displacement}, {"max_von_mises", optional_number(r.final.max_von_mises)},
         {"max_rotation", r.final.max_rotation}, {"max_strain", optional_number(r.final.max_strain)},
         {"exceeds_yield", r.final.exceeds_yield}}},
+      {"large_pull",
+       {{"ran", r.large_pull.ran}, {"distance", r.large_pull.distance}, {"per_size", r.large_pull.per_size},
+        {"area_ratio", {{"linear", r.large_pull.ran ? nlohmann::json(r.large_pull.linear_area_ratio) : nlohmann::json(nullptr)},
+                        {"nonlinear", optional_number(r.large_pull.nonlinear_area_ratio)}}},
+        {"nonlinear_refused", r.large_pull.nonlinear_refused}, {"nonlinear_iterations", r.large_pull.nonlinear_iterations},
+        {"ms", {{"linear", r.large_pull.linear_ms}, {"nonlinear", r.large_pull.nonlinear_ms}}}}},
       {"nonlinear_phases", r.nonlinear_phases},
       {"warnings", r.warnings},
       {"notes", r.notes},

@@ -57,6 +57,12 @@ const std::vector<Vec3>& rest(const Context& c) { return c.view->rest_vertices; 
 // Back to the rest shape: nothing but the supports.
 void let_go(Context& c, const std::string& phase) { c.deform(DeformationRequest{}, phase); }
 
+std::string length(double metres) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, metres < 0.1 ? "%.3g mm" : "%.3g m", metres < 0.1 ? metres * 1000.0 : metres);
+  return buf;
+}
+
 std::string mm(double metres) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.3g mm", metres * 1000.0);
@@ -135,6 +141,65 @@ void twist_phase(Context& c) {
   c.say(line);
   for (int k = 1; k <= c.per_phase; ++k) c.deform(at(full * k / c.per_phase), phase);
   c.check_stresses(phase);
+  let_go(c, phase);
+}
+
+void large_pull_phase(Context& c) {
+  const std::string phase = "large pull";
+  // The grab phase's point and direction, pulled as far as a hand in VR pulls.
+  const Vec3 pull = (c.stage.up + 0.5 * c.stage.e2).normalized();
+  const Reach r = reach(c, c.stage.extreme(rest(c), c.stage.up, 0.0, 1.0), c.stage.up, "large pull");
+  const Pose from{r.hand, Eigen::Quaterniond::Identity()};
+  const Grab grab = Grab::begin(c.view->evaluator, r.pick.point, c.view->control, from).value();
+  LargePull out;
+  out.distance = c.options.large_pull_per_size * c.stage.size;
+  const Pose to{r.hand + out.distance * pull, from.orientation};
+  out.hand = {to.position, grab.target(to), grab.rest_position()};
+  char line[160];
+  std::snprintf(line, sizeof line, "the top pulled %s (%.0f%% of the object's size) up and out, the supports held",
+                length(out.distance).c_str(), 100.0 * c.options.large_pull_per_size);
+  out.caption = line;
+  c.say("large pull: " + out.caption + ", with both models");
+  DeformationRequest request;
+  request.limit_constraints.push_back(grab.constraint(to));
+  const auto& triangles = c.view->surface.triangles();
+  const double rest_area = surface_area(c.view->rest_vertices, triangles);
+  const auto solve = [&](DeformationModel model, LargePull::Answer& a) {
+    const auto start = Clock::now();
+    auto result = c.solve(request, model);
+    a.ms = ms_between(start, Clock::now());
+    // A nonlinear solve that cannot reach equilibrium is a 422 that says why: shown as such.
+    if (!result && (model == DeformationModel::kLinear || result.error().code != ErrorCode::kUnprocessable)) {
+      throw Exception(result.error());
+    }
+    if (!result) {
+      a.refused = result.error().message;
+      return;
+    }
+    a.positions = result->positions;
+    a.iterations = result->iterations;
+    a.area_ratio = surface_area(c.view->surface.vertices(), triangles) / rest_area;
+  };
+  solve(DeformationModel::kLinear, out.linear);
+  solve(DeformationModel::kNonlinear, out.nonlinear);
+  auto& rep = c.report.large_pull;
+  rep.ran = true;
+  rep.distance = out.distance;
+  rep.per_size = c.options.large_pull_per_size;
+  rep.linear_area_ratio = out.linear.area_ratio;
+  rep.linear_ms = out.linear.ms;
+  rep.nonlinear_ms = out.nonlinear.ms;
+  if (out.nonlinear.refused.empty()) {
+    rep.nonlinear_area_ratio = out.nonlinear.area_ratio;
+    rep.nonlinear_iterations = out.nonlinear.iterations;
+    std::snprintf(line, sizeof line, "large pull: surface area %.3g times the rest area (linear), %.3g (nonlinear, %d iterations)",
+                  out.linear.area_ratio, out.nonlinear.area_ratio, out.nonlinear.iterations);
+    c.say(line);
+  } else {
+    rep.nonlinear_refused = out.nonlinear.refused;
+    c.say("large pull: the server refused the nonlinear solve: " + out.nonlinear.refused);
+  }
+  c.large_pull = std::move(out);
   let_go(c, phase);
 }
 

@@ -14,6 +14,10 @@ void grab_phase(Context& c);
 void push_phase(Context& c);
 /// Lifts a point while turning its tangent plane, then lets go.
 void twist_phase(Context& c);
+/// One large pull (the grab's point, far) solved with both models, for the side-by-side picture;
+/// then lets go. Outside the latencies and the range checks: the linear answer leaves the range on
+/// purpose.
+void large_pull_phase(Context& c);
 /// Two hands pull two points apart and hold them (the final state).
 void two_hands_phase(Context& c);
 

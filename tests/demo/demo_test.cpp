@@ -13,6 +13,9 @@
 #include <sstream>
 
 #include <gtest/gtest.h>
+#define STB_IMAGE_IMPLEMENTATION
+#define STB_IMAGE_STATIC
+#include <stb/stb_image.h>
 #include <nlohmann/json.hpp>
 
 #include "test_meshes.h"
@@ -33,6 +36,7 @@ DemoOptions short_options(const std::string& out) {
 
 TEST(Demo, ShortSessionRunsEveryLayer) {
   DemoOptions options = short_options("softshell-demo-test");
+  options.large_pull = false;  // its nonlinear solve takes seconds on spot (LargePullIsDrawnWithBothModelsSideBySide)
   options.material = material_preset("aluminium", 0.002).value();
   options.material_name = "aluminium";
   auto report = run_demo(options);
@@ -188,6 +192,93 @@ TEST(Demo, LoadsBeyondTheLinearRangeAreSolvedWithTheNonlinearModel) {
   EXPECT_TRUE(linear->nonlinear_phases.empty());
 }
 
+// A PNG decoded (RGB), empty if the file is not one.
+struct Png {
+  int width = 0, height = 0;
+  std::vector<unsigned char> rgb;
+};
+Png read_png(const std::filesystem::path& path) {
+  Png png;
+  int channels = 0;
+  unsigned char* data = stbi_load(path.string().c_str(), &png.width, &png.height, &channels, 3);
+  if (!data) return {};
+  png.rgb.assign(data, data + static_cast<size_t>(3 * png.width * png.height));
+  stbi_image_free(data);
+  return png;
+}
+
+// One large pull solved with both models and drawn side by side: the linear model stretches the
+// surface (a rotation is a stretch to it), the nonlinear one keeps its area closer to the rest one.
+// (On the 32-point torus, held on the floor: the nonlinear solve is quick there.)
+TEST(Demo, LargePullIsDrawnWithBothModelsSideBySide) {
+  DemoOptions options = short_options("softshell-demo-large-pull");
+  options.mesh = test::asset_path("meshes/catmark_torus.obj");
+  options.bullet = false;
+  options.follower = false;
+  auto report = run_demo(options);
+  ASSERT_TRUE(report.ok()) << report.error().message;
+  const auto& p = report->large_pull;
+  ASSERT_TRUE(p.ran);
+  EXPECT_NEAR(p.distance, 0.4 * report->setup.size, 1e-9 * report->setup.size);
+  ASSERT_TRUE(p.nonlinear_area_ratio.has_value()) << p.nonlinear_refused;
+  EXPECT_GT(p.linear_area_ratio, 1.0);
+  EXPECT_LT(std::abs(*p.nonlinear_area_ratio - 1.0), std::abs(p.linear_area_ratio - 1.0));
+  EXPECT_GT(p.nonlinear_iterations, 0);
+  // The pull is outside the latencies and the range checks; the script around it is unchanged.
+  EXPECT_TRUE(report->warnings.empty()) << report->warnings.front();
+  EXPECT_TRUE(report->nonlinear_phases.empty());
+  EXPECT_EQ(report->probes, 4);
+  const auto picture = std::find_if(report->outputs.begin(), report->outputs.end(), [](const std::string& o) {
+    return std::filesystem::path(o).filename() == "large-pull-linear-vs-nonlinear.png";
+  });
+  ASSERT_NE(picture, report->outputs.end());
+  const Png png = read_png(*picture);
+  ASSERT_EQ(png.width, 2 * options.picture_width) << *picture;
+  ASSERT_EQ(png.height, options.picture_height);
+  // Two different answers: the panels differ in many pixels (not only in their labels).
+  int differ = 0;
+  for (int y = 0; y < png.height; ++y) {
+    for (int x = 0; x < options.picture_width; ++x) {
+      const size_t left = static_cast<size_t>(3 * (y * png.width + x)), right = left + 3 * static_cast<size_t>(options.picture_width);
+      differ += std::abs(png.rgb[left] - png.rgb[right]) + std::abs(png.rgb[left + 1] - png.rgb[right + 1]) > 30;
+    }
+  }
+  EXPECT_GT(differ, options.picture_width * options.picture_height / 50);
+  const auto j = nlohmann::json::parse(format_json(*report));
+  EXPECT_DOUBLE_EQ(j["large_pull"]["area_ratio"]["linear"].get<double>(), p.linear_area_ratio);
+  EXPECT_DOUBLE_EQ(j["large_pull"]["area_ratio"]["nonlinear"].get<double>(), *p.nonlinear_area_ratio);
+  EXPECT_NE(format_summary(*report).find("large pull"), std::string::npos);
+  // Without pictures there is nothing to draw it in: no nonlinear solve.
+  options.pictures = false;
+  report = run_demo(options);
+  ASSERT_TRUE(report.ok()) << report.error().message;
+  EXPECT_FALSE(report->large_pull.ran);
+  EXPECT_TRUE(nlohmann::json::parse(format_json(*report))["large_pull"]["area_ratio"]["linear"].is_null());
+}
+
+// A nonlinear solve the server refuses (here: a solver allowed one iteration) is shown as refused,
+// with the server's message, beside the linear answer; never faked.
+TEST(Demo, LargePullShowsARefusedNonlinearSolve) {
+  DemoOptions options = short_options("softshell-demo-large-pull-refused");
+  options.mesh = test::asset_path("meshes/catmark_torus.obj");
+  options.bullet = false;
+  options.follower = false;
+  options.embedded.nonlinear.max_iterations = 1;
+  auto report = run_demo(options);
+  ASSERT_TRUE(report.ok()) << report.error().message;
+  const auto& p = report->large_pull;
+  ASSERT_TRUE(p.ran);
+  EXPECT_GT(p.linear_area_ratio, 1.0);
+  EXPECT_FALSE(p.nonlinear_area_ratio.has_value());
+  EXPECT_NE(p.nonlinear_refused.find("iteration limit"), std::string::npos) << p.nonlinear_refused;
+  EXPECT_NE(format_summary(*report).find("refused by the server: " + p.nonlinear_refused), std::string::npos);
+  const auto j = nlohmann::json::parse(format_json(*report));
+  EXPECT_TRUE(j["large_pull"]["area_ratio"]["nonlinear"].is_null());
+  EXPECT_EQ(j["large_pull"]["nonlinear_refused"], p.nonlinear_refused);
+  const Png png = read_png(std::filesystem::path(options.out_dir) / "large-pull-linear-vs-nonlinear.png");
+  EXPECT_EQ(png.width, 2 * options.picture_width);
+}
+
 TEST(Demo, BadInputIsAnErrorNotACrash) {
   DemoOptions options;
   options.mesh = "/nonexistent.obj";
@@ -208,6 +299,9 @@ TEST(Demo, BadInputIsAnErrorNotACrash) {
   EXPECT_NE(report.error().message.find("subdivide it once"), std::string::npos) << report.error().message;
   options.mesh.clear();
   options.deformations = 3;
+  EXPECT_EQ(run_demo(options).error().code, ErrorCode::kInvalidArgument);
+  options.deformations = 120;
+  options.large_pull_per_size = std::nan("");
   EXPECT_EQ(run_demo(options).error().code, ErrorCode::kInvalidArgument);
 }
 
@@ -370,6 +464,27 @@ TEST(DemoProgram, AgainstARunningServer) {
   EXPECT_EQ(second.out.find("paper Table 1"), std::string::npos);
 }
 
+// The large pull against a separate server: both answers come over HTTP (JSON: the request has a
+// limit constraint and a model), the picture and the area ratios as in-process.
+TEST(DemoProgram, LargePullAgainstARunningServer) {
+  ServerProcess server;
+  const std::string out = ::testing::TempDir() + "/softshell-demo-remote-large-pull";
+  std::filesystem::remove_all(out);
+  const ProgramRun r = run_program("--server " + server.url() + " --mesh '" + test::asset_path("meshes/catmark_torus.obj").string() +
+                                       "' --short --level 2 --no-bullet --no-follower --json --quiet --out '" + out + "'",
+                                   "remote-large-pull");
+  ASSERT_EQ(r.status, 0) << r.err << r.out;
+  const auto& p = r.json["large_pull"];
+  ASSERT_TRUE(p["ran"].get<bool>());
+  ASSERT_TRUE(p["area_ratio"]["nonlinear"].is_number()) << p.dump();
+  const double linear = p["area_ratio"]["linear"].get<double>(), nonlinear = p["area_ratio"]["nonlinear"].get<double>();
+  EXPECT_LT(std::abs(nonlinear - 1.0), std::abs(linear - 1.0));
+  const Png png = read_png(std::filesystem::path(out) / "large-pull-linear-vs-nonlinear.png");
+  EXPECT_EQ(png.width, 1600);  // two panels of the default 800 x 600
+  EXPECT_EQ(png.height, 600);
+  EXPECT_NE(r.json["outputs"].dump().find("large-pull-linear-vs-nonlinear.png"), std::string::npos);
+}
+
 TEST(DemoProgram, OptionsVersionAndMessages) {
   const ProgramRun version = run_program("--version", "version");
   EXPECT_EQ(version.status, 0);
@@ -377,7 +492,7 @@ TEST(DemoProgram, OptionsVersionAndMessages) {
   const ProgramRun help = run_program("--help", "help");
   EXPECT_EQ(help.status, 0);
   for (const char* option : {"--mesh", "--material", "--thickness", "--server", "--out", "--level", "--deformations", "--up",
-                             "--short", "--load-scale", "--no-bullet", "--no-follower", "--no-pictures", "--quiet", "--json"}) {
+                             "--short", "--load-scale", "--large-pull", "--no-bullet", "--no-follower", "--no-pictures", "--quiet", "--json"}) {
     EXPECT_NE(help.out.find(option), std::string::npos) << option;
   }
   const ProgramRun bad_up = run_program("--up w", "bad-up");
@@ -386,6 +501,7 @@ TEST(DemoProgram, OptionsVersionAndMessages) {
   EXPECT_EQ(run_program("--level=9", "bad-level").status, 2);
   EXPECT_EQ(run_program("--frobnicate", "unknown").status, 2);
   EXPECT_EQ(run_program("--material=unobtainium", "bad-material").status, 2);
+  EXPECT_EQ(run_program("--large-pull=-0.5", "bad-large-pull").status, 2);
   const ProgramRun directory = run_program("--mesh='" + ::testing::TempDir() + "' --quiet", "directory");
   EXPECT_EQ(directory.status, 1);
   EXPECT_NE(directory.err.find("is a directory"), std::string::npos) << directory.err;
