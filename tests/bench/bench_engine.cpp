@@ -270,6 +270,13 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
     result.error = "one request: " + one.error().message;
     return result;
   }
+  if (std::getenv("SOFTSHELL_BENCH_STEPS")) {
+    const engine::NonlinearStats& s = one->stats;
+    std::printf("  from rest: %.1f ms, %d load steps, %d Newton (%d approximate, %d evaluations), %d Krylov, %d factors; "
+                "forces %.1f ms, Krylov %.1f ms, tangents %.1f ms\n", result.one_shot_ms, s.load_steps, s.iterations,
+                s.approximate_iterations, s.evaluations, s.krylov_iterations, s.factorizations, s.evaluate_ms,
+                s.krylov_ms, s.tangent_ms);
+  }
   result.one_shot_iterations = one->stats.iterations;
   result.one_shot_load_steps = one->stats.load_steps;
   result.one_shot_difference = (one->displacement - u).norm() / u.norm();

@@ -419,6 +419,9 @@ bool Run::solve_step(double lambda, double tolerance) {
     fresh_ = false;
   }
   double first_out = 0.0, previous = 1.0, eta_cap = 1e-3;
+  // Each load step starts on the approximate tangent again: a slow iteration far from the last
+  // step's answer says little about how good the approximation is near this one's.
+  approximate_ = options_.approximate_directions && shell_.has_jacobian_rule();
   for (int it = 0;; ++it) {
     if (options_.cancel && options_.cancel->load()) fail(ErrorCode::kCancelled, "the nonlinear solve was cancelled");
     const Eigen::VectorXd r = residual(state_, lambda);
