@@ -13,6 +13,7 @@
 #include <Eigen/Geometry>
 
 #include "bench_support.h"
+#include "limit_displacement.h"
 #include "shell_benchmarks.h"
 #include "softshell/engine/nonlinear_solver.h"
 #include "softshell/engine/solver.h"
@@ -21,12 +22,7 @@
 namespace softshell::engine {
 namespace {
 
-Vec3 limit_displacement(const ShellModel& model, const Eigen::VectorXd& u, const SurfacePoint& p) {
-  LimitStencil st = model.evaluator().stencil(p);
-  Vec3 d = Vec3::Zero();
-  for (size_t k = 0; k < st.size(); ++k) d += st.position[k] * u.segment<3>(3 * st.indices[k]);
-  return d;
-}
+using test::limit_displacement;
 
 // The clamp of a ghost-layer strip at x = 0: position and both tangents held at the ends and the
 // middle of every face edge (the trace is a cubic spline, so this holds it exactly).

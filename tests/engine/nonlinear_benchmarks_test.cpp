@@ -12,18 +12,14 @@
 
 #include <gtest/gtest.h>
 
+#include "limit_displacement.h"
 #include "shell_benchmarks.h"
 #include "softshell/engine/nonlinear_solver.h"
 
 namespace softshell::engine {
 namespace {
 
-Vec3 limit_displacement(const ShellModel& model, const Eigen::VectorXd& u, const SurfacePoint& p) {
-  LimitStencil st = model.evaluator().stencil(p);
-  Vec3 d = Vec3::Zero();
-  for (size_t k = 0; k < st.size(); ++k) d += st.position[k] * u.segment<3>(3 * st.indices[k]);
-  return d;
-}
+using test::limit_displacement;
 
 // Relative differences from the reference, per tabulated load and measured value.
 using Differences = std::vector<std::vector<double>>;

@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include "limit_displacement.h"
 #include "softshell/engine/nonlinear_solver.h"
 #include "softshell/level_of_detail.h"
 #include "test_meshes.h"
@@ -48,12 +49,7 @@ Strip make_strip(int nx, int ny, double length, double width) {
   return s;
 }
 
-Vec3 limit_displacement(const ShellModel& model, const Eigen::VectorXd& u, const SurfacePoint& p) {
-  LimitStencil st = model.evaluator().stencil(p);
-  Vec3 d = Vec3::Zero();
-  for (size_t k = 0; k < st.size(); ++k) d += st.position[k] * u.segment<3>(3 * st.indices[k]);
-  return d;
-}
+using test::limit_displacement;
 
 // Cantilever strip (nu = 0, so it bends as a beam), clamped at x = 0, a dead vertical load P at
 // the free end spread evenly along it. Mattiasson (1981), elliptic-integral solution of the

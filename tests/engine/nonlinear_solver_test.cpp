@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include "limit_displacement.h"
 #include "softshell/engine/solver.h"
 #include "solver_testing.h"
 #include "test_meshes.h"
@@ -17,12 +18,7 @@ namespace {
 
 Material material() { return Material{2.0e9, 0.35, 0.002, 1000.0}; }
 
-Vec3 limit_displacement(const ShellModel& model, const Eigen::VectorXd& u, const SurfacePoint& p) {
-  LimitStencil st = model.evaluator().stencil(p);
-  Vec3 d = Vec3::Zero();
-  for (size_t k = 0; k < st.size(); ++k) d += st.position[k] * u.segment<3>(3 * st.indices[k]);
-  return d;
-}
+using test::limit_displacement;
 
 // A plate clamped along x = 0 (two columns of control points), 0.4 x 0.2, t = 2 mm.
 struct Cantilever {

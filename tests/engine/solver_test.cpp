@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include "limit_displacement.h"
 #include "shell_benchmarks.h"
 #include "softshell/request_validation.h"
 #include "test_meshes.h"
@@ -21,12 +22,7 @@ std::shared_ptr<const ShellModel> build(const ControlMesh& mesh) {
 }
 
 // Limit displacement at a point for a solution.
-Vec3 limit_displacement(const ShellModel& model, const Eigen::VectorXd& u, const SurfacePoint& p) {
-  LimitStencil st = model.evaluator().stencil(p);
-  Vec3 d = Vec3::Zero();
-  for (size_t k = 0; k < st.size(); ++k) d += st.position[k] * u.segment<3>(3 * st.indices[k]);
-  return d;
-}
+using test::limit_displacement;
 
 double relative_difference(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
   return (a - b).norm() / std::max(a.norm(), 1e-300);
