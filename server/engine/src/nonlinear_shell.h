@@ -89,7 +89,7 @@ class NonlinearShell {
   /// the model's exact K plus the nonlinear remainder integrated with the coarse rule. It is K at
   /// rest and differs from the exact tangent only by the coarse rule's error on the remainder, so
   /// Newton on it converges nearly as fast, while a product costs a pass over the coarse points
-  /// (a tenth of the model's on meshes with many extraordinary vertices) and two sparse products.
+  /// (far fewer than the model's where extraordinary vertices are refined) and two sparse products.
   /// `coarse` is the state at the same displacement on the coarse rule (`evaluate_coarse`).
   bool evaluate_coarse(const Eigen::VectorXd& u, ShellState& coarse) const;
   void approximate_tangent_product(const ShellState& coarse, double pressure, const Eigen::VectorXd& v,
