@@ -164,7 +164,8 @@ class Run {
   int last_krylov_ = 0;
   double last_residual_ = 0.0;
   // Newton directions on the approximate tangent (NonlinearShell::approximate_tangent_product)
-  // until Newton on it is slow; then on the exact one for the rest of the solve.
+  // until Newton on it is slow; then on the exact one for the rest of the load step (set at the
+  // start of each, solve_step).
   bool approximate_ = false;
   ShellState coarse_;  // the state on the coarse rule, at state_'s displacement (when approximate_)
   NonlinearStats stats_;
@@ -199,7 +200,6 @@ Run::Run(std::shared_ptr<const ShellModel> model, const NonlinearShell& shell, F
   // E t h sqrt(3n) for a rigid half turn), so 1e-6 leaves a margin of 30 over the tolerance.
   const Material& mat = m.material();
   const double h = std::sqrt(m.area() / std::max(1, m.mesh().num_faces()));
-  approximate_ = options.approximate_directions && shell.has_jacobian_rule();
   force_floor_ = 1e-6 * mat.youngs_modulus * mat.thickness * h * std::sqrt(static_cast<double>(ndof));
 }
 
