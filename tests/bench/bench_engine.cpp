@@ -241,6 +241,7 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
       std::printf("  step %d: %.1f ms, %d Newton (%d approximate, %d evaluations), %d Krylov, %d factors; forces %.1f ms, "
                   "Krylov %.1f ms, tangents %.1f ms\n", k, ms, s.iterations, s.approximate_iterations, s.evaluations,
                   s.krylov_iterations, s.factorizations, s.evaluate_ms, s.krylov_ms, s.tangent_ms);
+      std::fflush(stdout);  // a long drag shows its progress, also into a file
     }
     result.iterations += s.iterations;
     result.krylov += s.krylov_iterations;
