@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "limit_displacement.h"
+#include "shell_benchmarks.h"
 #include "softshell/engine/nonlinear_solver.h"
 #include "softshell/level_of_detail.h"
 #include "test_meshes.h"
@@ -57,9 +58,7 @@ using test::limit_displacement;
 TEST(NonlinearReference, LargeDeflectionCantileverFollowsTheElastica) {
   constexpr double kLength = 1.0, kWidth = 0.1, kThickness = 0.01, kYoung = 1.0e7;
   const double ei = kYoung * kWidth * kThickness * kThickness * kThickness / 12.0;
-  const double loads[] = {1.0, 2.0, 5.0, 10.0};
-  const double vertical[] = {0.30172, 0.49346, 0.71379, 0.81061};
-  const double horizontal[] = {0.05643, 0.16064, 0.38763, 0.55500};
+  const auto& reference = test::kMattiassonCantilever;
   std::printf("\nCantilever under a dead tip load: tip deflection / L against the elastica (Mattiasson 1981)\n");
   std::printf("%8s %8s %10s %10s %9s %10s %10s %9s %6s\n", "faces", "PL^2/EI", "vertical", "reference", "error",
               "horizontal", "reference", "error", "iters");
@@ -81,8 +80,8 @@ TEST(NonlinearReference, LargeDeflectionCantileverFollowsTheElastica) {
       for (double t : {0.5 - g, 0.5 + g}) load_points.push_back(strip.at(1.0, (j + t) / strip.ny));
     }
     Eigen::VectorXd u = Eigen::VectorXd::Zero(model->num_dofs());
-    for (size_t k = 0; k < 4; ++k) {
-      const double p = loads[k] * ei / (kLength * kLength);
+    for (const test::ElasticaPoint& ref : reference) {
+      const double p = ref.load * ei / (kLength * kLength);
       request.surface_forces.clear();
       for (const SurfacePoint& point : load_points) {
         request.surface_forces.push_back({point, Vec3(0.0, 0.0, -p / static_cast<double>(load_points.size()))});
@@ -92,12 +91,12 @@ TEST(NonlinearReference, LargeDeflectionCantileverFollowsTheElastica) {
       EXPECT_LT(solution->stats.residual, 1e-8);
       const Vec3 tip = limit_displacement(*model, solution->displacement, strip.at(1.0, 0.5));
       const double v = -tip.z() / kLength, h = -tip.x() / kLength;
-      std::printf("%5dx%-2d %8.0f %10.5f %10.5f %8.3f%% %10.5f %10.5f %8.3f%% %6d\n", nx, strip.ny, loads[k], v,
-                  vertical[k], 100 * (v / vertical[k] - 1), h, horizontal[k], 100 * (h / horizontal[k] - 1),
+      std::printf("%5dx%-2d %8.0f %10.5f %10.5f %8.3f%% %10.5f %10.5f %8.3f%% %6d\n", nx, strip.ny, ref.load, v,
+                  ref.vertical, 100 * (v / ref.vertical - 1), h, ref.horizontal, 100 * (h / ref.horizontal - 1),
                   solution->stats.iterations);
       if (nx == 16) {
-        worst_vertical = std::max(worst_vertical, std::abs(v / vertical[k] - 1));
-        worst_horizontal = std::max(worst_horizontal, std::abs(h / horizontal[k] - 1));
+        worst_vertical = std::max(worst_vertical, std::abs(v / ref.vertical - 1));
+        worst_horizontal = std::max(worst_horizontal, std::abs(h / ref.horizontal - 1));
       }
     }
   }

@@ -180,4 +180,12 @@ inline constexpr SzeRow kSzeHemisphere[] = {
 /// uniform load, w D / (q a^4) (to 1e-12).
 inline constexpr double kNavierCentreDeflection = 0.004062352661;
 
+/// The large-deflection cantilever under a dead tip load (elastica; Mattiasson 1981, as issue 16
+/// quotes it): for P L^2 / EI = load, the tip's vertical and horizontal displacement over L.
+struct ElasticaPoint {
+  double load, vertical, horizontal;
+};
+inline constexpr ElasticaPoint kMattiassonCantilever[] = {
+    {1.0, 0.30172, 0.05643}, {2.0, 0.49346, 0.16064}, {5.0, 0.71379, 0.38763}, {10.0, 0.81061, 0.55500}};
+
 }  // namespace softshell::test
