@@ -370,8 +370,28 @@ bool NonlinearShell::assemble_jacobian(const ShellState& state, double pressure,
   }
   ShellState coarse;
   if (!evaluate_rule(coarse_, state.displacement, coarse, false)) return false;
-  assemble_rule(coarse_, coarse, pressure, out);
+  assemble_approximate_tangent(coarse, pressure, out);
   return true;
+}
+
+Eigen::VectorXd NonlinearShell::approximate_force_change(const ShellState& from, const ShellState& to) const {
+  if (!has_jacobian_rule()) fail(ErrorCode::kInternal, "nonlinear shell: no coarse rule");
+  const Eigen::VectorXd step = to.displacement - from.displacement;
+  Eigen::VectorXd change = model_->stiffness() * step;
+  change += to.internal_force - from.internal_force;
+  change -= coarse_rest_ * step;
+  return change;
+}
+
+// K + (T_coarse - K_coarse(0)) value by value: all three are on K's pattern (assemble_rule).
+void NonlinearShell::assemble_approximate_tangent(const ShellState& coarse, double pressure,
+                                                  Eigen::SparseMatrix<double>& out) const {
+  assemble_rule(coarse_, coarse, pressure, out);
+  const Eigen::SparseMatrix<double>& k = model_->stiffness();
+  const double* kv = k.valuePtr();
+  const double* rest = coarse_rest_.valuePtr();
+  double* v = out.valuePtr();
+  for (Eigen::Index i = 0; i < out.nonZeros(); ++i) v[i] += kv[i] - rest[i];
 }
 
 void NonlinearShell::assemble_rule(const Rule& rule, const ShellState& state, double pressure,

@@ -79,8 +79,8 @@ class NonlinearShell {
   /// surface; its symmetric part is what a Cholesky factor can take.
   void assemble_tangent(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
 
-  /// The same tangent integrated with the coarse rule (the exact one if there is none).
-  /// Returns false if the state is degenerate at a coarse point.
+  /// The approximate tangent J~ below, assembled (the exact tangent if there is no coarse rule):
+  /// the preconditioner's matrix. Returns false if the state is degenerate at a coarse point.
   bool assemble_jacobian(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
   bool has_jacobian_rule() const { return coarse_.points > 0; }
 
@@ -94,6 +94,12 @@ class NonlinearShell {
   bool evaluate_coarse(const Eigen::VectorXd& u, ShellState& coarse) const;
   void approximate_tangent_product(const ShellState& coarse, double pressure, const Eigen::VectorXd& v,
                                    Eigen::VectorXd& out) const;
+  /// The change of the internal forces the approximate model predicts from coarse state `from` to
+  /// coarse state `to`: K s + (f_coarse(to) - f_coarse(from)) - K_coarse(0) s, s the step between
+  /// them (the model's linear part exact, the nonlinear remainder on the coarse rule).
+  Eigen::VectorXd approximate_force_change(const ShellState& from, const ShellState& to) const;
+  /// J~ at `coarse`, assembled on the pattern of the model's K.
+  void assemble_approximate_tangent(const ShellState& coarse, double pressure, Eigen::SparseMatrix<double>& out) const;
 
  private:
   // A run of an element's points. Where the run is one cell of the quadrature (n x n Gauss points
