@@ -115,6 +115,55 @@ TEST(NonlinearShell, TangentIsTheDerivativeOfTheInternalForces) {
   }
 }
 
+// The approximate model the solver's directions and preconditioner use: K plus the nonlinear
+// remainder on the coarse rule. Its assembled tangent is the operator of its products, its
+// predicted change of the forces has that tangent as derivative, and it misses the true change
+// only to second order from rest (exactly nothing where the coarse rule is the model's own).
+TEST(NonlinearShell, TheApproximateModelIsConsistent) {
+  for (const Case& c : cases()) {
+    auto model = ShellModel::build(c.mesh, material()).value();
+    auto shell = NonlinearShell::build(model, 0, 4);
+    ASSERT_TRUE(shell->has_jacobian_rule());
+    const double size = c.mesh.bounding_diagonal();
+    const auto n = model->num_dofs();
+    std::mt19937 rng(5);
+    const Eigen::VectorXd u = random_vector(n, 0.02 * size, rng);
+    const Eigen::VectorXd v = random_vector(n, 1.0, rng);
+    ShellState coarse, plus, minus;
+    ASSERT_TRUE(shell->evaluate_coarse(u, coarse)) << c.name;
+    Eigen::VectorXd jv;
+    shell->approximate_tangent_product(coarse, 0.0, v, jv);
+    Eigen::SparseMatrix<double> assembled;
+    shell->assemble_approximate_tangent(coarse, 0.0, assembled);
+    EXPECT_LT((assembled * v - jv).norm(), 1e-11 * jv.norm()) << c.name;
+    const double h = 1e-6 * size;
+    ASSERT_TRUE(shell->evaluate_coarse(u + h * v, plus));
+    ASSERT_TRUE(shell->evaluate_coarse(u - h * v, minus));
+    const Eigen::VectorXd fd = shell->approximate_force_change(minus, plus) / (2.0 * h);
+    EXPECT_LT((fd - jv).norm(), 1e-6 * jv.norm()) << c.name;
+
+    // From rest: f(s) - predicted(s) is O(|s|^2).
+    ShellState rest, fine;
+    ASSERT_TRUE(shell->evaluate_coarse(Eigen::VectorXd::Zero(n), rest));
+    const Eigen::VectorXd s = random_vector(n, 1e-3 * size, rng);
+    double last_miss = 0.0;
+    for (double scale : {1.0, 0.5}) {
+      ASSERT_TRUE(shell->evaluate_coarse(scale * s, coarse));
+      ASSERT_TRUE(shell->evaluate(scale * s, fine, false));
+      const Eigen::VectorXd predicted = shell->approximate_force_change(rest, coarse);
+      const double miss = (fine.internal_force - predicted).norm();
+      EXPECT_LT(miss, 0.1 * fine.internal_force.norm()) << c.name;
+      if (scale < 1.0 && last_miss > 1e-9 * fine.internal_force.norm()) {
+        EXPECT_GT(last_miss / miss, 3.0) << c.name << ": the miss is not second order";
+      }
+      last_miss = miss;
+    }
+    if (c.name == "plate" || c.name == "dome") {  // no refined cells: the coarse rule is the model's
+      EXPECT_LT(last_miss, 1e-9 * fine.internal_force.norm()) << c.name;
+    }
+  }
+}
+
 TEST(NonlinearShell, RigidMotionsOfAnySizeAreUnstrained) {
   for (const Case& c : cases()) {
     auto model = ShellModel::build(c.mesh, material()).value();

@@ -129,7 +129,7 @@ class Run {
   double first_step();
   Eigen::VectorXd predicted_path(const std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>>& history) const;
   bool solve_step(double lambda, double tolerance);
-  void measure_model_error(const ShellState& next);
+  void measure_miss(const ShellState& next);
   double check_answer(const Eigen::VectorXd& u);
   [[noreturn]] void give_up(double lambda, const std::string& why) const;
 
@@ -461,7 +461,7 @@ bool Run::solve_step(double lambda, double tolerance) {
     //    cells): as on the exact tangent, tighter;
     //  - otherwise the nonlinearity, which neither would help: far from the answer Newton is slow
     //    on the exact tangent too, and an exact direction costs 5-10 times more (measured from
-    //    rest on catmark_righthanded: 2.5 s switching at the first slow iteration, 1.1 s so).
+    //    rest on catmark_righthanded: 2.5 s switching at the first slow iteration, 1.2 s so).
     if (it > 0 && res > 0.2 * previous) {
       const double missed = approximate_ && miss_.size() == r.size() ? reactions_->out_of_balance(miss_).norm() : 0.0;
       if (approximate_ && missed > 0.5 * out) {
@@ -487,7 +487,7 @@ bool Run::solve_step(double lambda, double tolerance) {
       if (accepted) u_ = ut;
     }
     if (!accepted) return false;
-    if (approximate_) measure_model_error(trial);
+    if (approximate_) measure_miss(trial);
     state_ = std::move(trial);
     fresh_ = false;
   }
@@ -496,7 +496,7 @@ bool Run::solve_step(double lambda, double tolerance) {
 // After a step from state_ to `next` on the approximate directions: the coarse state at `next`
 // (the next direction needs it) and what the approximate model mispredicted of the step's change
 // of the internal forces.
-void Run::measure_model_error(const ShellState& next) {
+void Run::measure_miss(const ShellState& next) {
   miss_.resize(0);
   if (coarse_.displacement.size() != state_.displacement.size() || coarse_.displacement != state_.displacement) {
     return;  // no coarse state at the step's start: nothing measured

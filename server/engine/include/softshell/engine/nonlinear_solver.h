@@ -46,9 +46,9 @@ struct NonlinearOptions {
   int tangent_gauss_points = 4;
   /// Newton directions on K plus the coarse rule's nonlinear remainder of the tangent (measured on
   /// catmark_righthanded: a Krylov iteration of about 2 ms instead of 7-23 ms) until an iteration gains
-  /// less than a factor of 5 while the approximation mispredicted the last step's change of the
-  /// internal forces by more than 20%; from then on to the end of that load step, and with false,
-  /// on the exact tangent. The answer is the same either way (the same residual and tolerance).
+  /// less than a factor of 5 and most of what is left is what the approximation mispredicted of
+  /// the last step's change of the internal forces; from then on to the end of that load step,
+  /// and with false, on the exact tangent. The answer is the same either way (the same residual and tolerance).
   bool approximate_directions = true;
   /// If set and it becomes true, a running solve stops at its next iteration with kCancelled
   /// (a server shutting down; the flag must outlive the solver).
