@@ -100,18 +100,7 @@ void end_moment(const std::vector<int>& levels) {
     for (int degrees = 15; degrees <= 360; degrees += 15) {
       const double theta = degrees * M_PI / 180.0;
       const Eigen::Matrix3d turn = Eigen::AngleAxisd(theta, Vec3::UnitY()).toRotationMatrix();
-      request.lagrange_constraints.clear();
-      for (const SurfacePoint& p : tip_points) {
-        const LimitStencil st = model->evaluator().stencil(p);
-        const Vec3 a1 = model->evaluator().evaluate(p).du;
-        LagrangeConstraint c;
-        for (size_t k = 0; k < st.size(); ++k) {
-          c.indices.push_back(st.indices[k]);
-          c.coefficients.push_back(Vec3::Constant(st.du[k]));
-        }
-        c.values = turn * a1 - a1;
-        request.lagrange_constraints.push_back(std::move(c));
-      }
+      request.lagrange_constraints = test::turned_tangents(model->evaluator(), tip_points, turn);
       auto solution = solver.solve(request, u);
       if (!solution.ok()) {
         std::printf("| %dx2 | %d° | refused: %s |\n", nx, degrees, solution.error().message.c_str());
@@ -144,10 +133,7 @@ void rigid_rotations() {
     const double size = mesh.bounding_diagonal();
     for (double degrees : {30.0, 90.0, 180.0}) {
       const Eigen::Matrix3d r = Eigen::AngleAxisd(degrees * M_PI / 180.0, axis.normalized()).toRotationMatrix();
-      auto rigid = [&](int32_t v) {
-        const Vec3 x = mesh.positions()[static_cast<size_t>(v)];
-        return Vec3(r * (x - through) + through - x);
-      };
+      auto rigid = [&](int32_t v) { return test::rigid_turn(r, through, mesh.positions()[static_cast<size_t>(v)]); };
       DeformationRequest request;
       for (int32_t v : held) request.vertex_constraints.push_back({v, kAxisAll, rigid(v)});
       auto solution = nonlinear.solve(request);

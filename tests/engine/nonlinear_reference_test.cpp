@@ -144,18 +144,7 @@ TEST(NonlinearReference, CantileverUnderAnEndMomentRollsIntoACircle) {
     for (int degrees = 15; degrees <= 360; degrees += 15) {
       const double theta = degrees * M_PI / 180.0;
       const Eigen::Matrix3d turn = Eigen::AngleAxisd(theta, Vec3::UnitY()).toRotationMatrix();
-      request.lagrange_constraints.clear();
-      for (const SurfacePoint& p : tip_points) {
-        const LimitStencil st = model->evaluator().stencil(p);
-        const Vec3 a1 = model->evaluator().evaluate(p).du;
-        LagrangeConstraint c;
-        for (size_t k = 0; k < st.size(); ++k) {
-          c.indices.push_back(st.indices[k]);
-          c.coefficients.push_back(Vec3::Constant(st.du[k]));
-        }
-        c.values = turn * a1 - a1;
-        request.lagrange_constraints.push_back(std::move(c));
-      }
+      request.lagrange_constraints = test::turned_tangents(model->evaluator(), tip_points, turn);
       auto solution = solver.solve(request, u);
       ASSERT_TRUE(solution.ok()) << nx << " faces, " << degrees << " degrees: " << solution.error().message;
       EXPECT_LT(solution->stats.residual, 1e-8);

@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "limit_displacement.h"
+#include "shell_benchmarks.h"
 #include "softshell/engine/solver.h"
 #include "solver_testing.h"
 #include "test_meshes.h"
@@ -74,10 +75,7 @@ void check_rigid_rotation(const ControlMesh& mesh, const std::vector<int32_t>& h
   const double size = mesh.bounding_diagonal();
   for (double degrees : {30.0, 90.0, 180.0}) {
     const Eigen::Matrix3d r = Eigen::AngleAxisd(degrees * M_PI / 180.0, axis.normalized()).toRotationMatrix();
-    auto rigid = [&](int32_t v) {
-      const Vec3 x = mesh.positions()[static_cast<size_t>(v)];
-      return Vec3(r * (x - through) + through - x);
-    };
+    auto rigid = [&](int32_t v) { return test::rigid_turn(r, through, mesh.positions()[static_cast<size_t>(v)]); };
     DeformationRequest request;
     for (int32_t v : held) request.vertex_constraints.push_back({v, kAxisAll, rigid(v)});
     auto solution = nonlinear.solve(request);

@@ -358,4 +358,21 @@ EvPlate make_ev_plate(int n, double a) {
   return plate;
 }
 
+std::vector<LagrangeConstraint> turned_tangents(const LimitEvaluator& evaluator, const std::vector<SurfacePoint>& points,
+                                                const Eigen::Matrix3d& rotation) {
+  std::vector<LagrangeConstraint> rows;
+  for (const SurfacePoint& p : points) {
+    const LimitStencil st = evaluator.stencil(p);
+    const Vec3 a1 = evaluator.evaluate(p).du;
+    LagrangeConstraint c;
+    for (size_t k = 0; k < st.size(); ++k) {
+      c.indices.push_back(st.indices[k]);
+      c.coefficients.push_back(Vec3::Constant(st.du[k]));
+    }
+    c.values = rotation * a1 - a1;
+    rows.push_back(std::move(c));
+  }
+  return rows;
+}
+
 }  // namespace softshell::test

@@ -5,8 +5,11 @@
 #include <functional>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "softshell/control_mesh.h"
 #include "softshell/deformation.h"
+#include "softshell/limit_evaluator.h"
 #include "softshell/material.h"
 
 namespace softshell::test {
@@ -187,5 +190,15 @@ struct ElasticaPoint {
 };
 inline constexpr ElasticaPoint kMattiassonCantilever[] = {
     {1.0, 0.30172, 0.05643}, {2.0, 0.49346, 0.16064}, {5.0, 0.71379, 0.38763}, {10.0, 0.81061, 0.55500}};
+
+/// A rigid turn `rotation` about the point `through`: the displacement that carries `x` with it.
+inline Vec3 rigid_turn(const Eigen::Matrix3d& rotation, const Vec3& through, const Vec3& x) {
+  return rotation * (x - through) + through - x;
+}
+
+/// Lagrange rows that turn the first surface tangent (d/du) at each point by `rotation`: an end
+/// moment's rotation prescribed on a strip's tip (the tangent's change, exact in the control points).
+std::vector<LagrangeConstraint> turned_tangents(const LimitEvaluator& evaluator, const std::vector<SurfacePoint>& points,
+                                                const Eigen::Matrix3d& rotation);
 
 }  // namespace softshell::test
