@@ -33,6 +33,7 @@ std::atomic<FastPathCorruption> g_corrupt_nonlinear_answer{nullptr};
 // What a solve leaves for the next one that starts from its answer (the next step of a drag).
 struct NonlinearMemory {
   Eigen::VectorXd end;                                        // the displacement it converged to
+  Eigen::VectorXd end_force;                                  // the internal forces there (or empty)
   std::vector<int32_t> fixed;                                 // the problem's prescribed DOFs
   std::vector<std::vector<std::pair<int32_t, double>>> rows;  // the rows' terms
   std::shared_ptr<const Factorization> factor;                // the last preconditioner's factor
@@ -575,10 +576,19 @@ NonlinearSolution Run::run() {
   const ShellModel& m = *model_;
   const auto ndof = m.num_dofs();
   u_ = u0_;
-  if (!evaluate(u_, state_)) {
-    fail(ErrorCode::kInvalidArgument, "the initial displacement folds the surface onto itself (a zero or inverted area element)");
+  const NonlinearMemory* mem = memory_in_.get();
+  const bool continues = mem && mem->end.size() == ndof && mem->end == u0_;
+  if (continues && mem->end_force.size() == ndof) {
+    // The last answer's forces: a drag step evaluates its predicted state next, not this one
+    // (one evaluation of the model's rule of the 6-7 a step costs).
+    r0_ = mem->end_force;
+  } else {
+    if (!evaluate(u_, state_)) {
+      fail(ErrorCode::kInvalidArgument,
+           "the initial displacement folds the surface onto itself (a zero or inverted area element)");
+    }
+    r0_ = state_.internal_force;
   }
-  r0_ = state_.internal_force;
   path_of_fixed_ = std::make_unique<internal::PrescribedPath>(m.mesh(), problem_, u0_);
   d0_.resize(static_cast<Eigen::Index>(problem_.rows.size()));
   for (size_t k = 0; k < problem_.rows.size(); ++k) {
@@ -592,9 +602,7 @@ NonlinearSolution Run::run() {
   // solve starts at rest, where K is the tangent.
   std::vector<std::vector<std::pair<int32_t, double>>> row_terms;
   for (const Row& row : problem_.rows) row_terms.push_back(row.terms);
-  const NonlinearMemory* mem = memory_in_.get();
   const bool at_rest = u0_.isZero(0.0);
-  const bool continues = mem && mem->end.size() == ndof && mem->end == u0_;
   if (mem && !at_rest && mem->fixed == problem_.fixed && mem->factor && mem->factor->pinned() == pins_.dofs &&
       !mem->factor_is_k) {
     factor_ = mem->factor;
@@ -620,6 +628,10 @@ NonlinearSolution Run::run() {
   history_ = same_drag ? mem->history : decltype(history_){};
   if (!same_drag && at_rest) history_.push_back({Eigen::VectorXd::Zero(targets_.size()), u0_});  // rest answers the empty request
 
+  if (path_.size() != ndof && state_.displacement.size() != ndof && !evaluate(u_, state_)) {  // first_step needs it
+    fail(ErrorCode::kInvalidArgument,
+         "the initial displacement folds the surface onto itself (a zero or inverted area element)");
+  }
   double lambda = 0.0, step = path_.size() == ndof ? 1.0 : first_step();
   std::vector<std::pair<double, Eigen::VectorXd>> converged{{0.0, u_}};
   while (lambda < 1.0) {
@@ -664,6 +676,9 @@ NonlinearSolution Run::run() {
 
   auto out = std::make_shared<NonlinearMemory>();
   out->end = solution.displacement;
+  if (state_.displacement.size() == ndof && state_.displacement == solution.displacement) {
+    out->end_force = state_.internal_force;
+  }
   out->fixed = problem_.fixed;
   out->rows = std::move(row_terms);
   out->factor = factor_;
