@@ -213,7 +213,12 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
     if (!shell->evaluate_rule(shell->coarse_, Eigen::VectorXd::Zero(m.num_dofs()), rest, false)) {
       fail(ErrorCode::kUnprocessable, "nonlinear shell: the limit surface is degenerate at a coarse quadrature point");
     }
-    shell->assemble_rule(shell->coarse_, rest, 0.0, shell->coarse_rest_);
+    Eigen::SparseMatrix<double> coarse_rest;
+    shell->assemble_rule(shell->coarse_, rest, 0.0, coarse_rest);
+    // K - K_coarse(0) value by value: both are on K's pattern (assemble_rule).
+    shell->coarse_error_ = m.stiffness();
+    double* error = shell->coarse_error_.valuePtr();
+    for (Eigen::Index i = 0; i < coarse_rest.nonZeros(); ++i) error[i] -= coarse_rest.valuePtr()[i];
   }
   return shell;
 }
@@ -237,7 +242,7 @@ Eigen::MatrixXd NonlinearShell::element_basis(const Rule& rule, const Element& e
 
 size_t NonlinearShell::memory_bytes() const {
   size_t bytes = sizeof(*this);
-  bytes += static_cast<size_t>(coarse_rest_.nonZeros()) * (sizeof(double) + sizeof(int));
+  bytes += static_cast<size_t>(coarse_error_.nonZeros()) * (sizeof(double) + sizeof(int));
   for (const Rule* rule : {&fine_, &coarse_}) {
     bytes += rule->reference.size() * sizeof(double);
     for (const Element& e : rule->elements) {
@@ -317,9 +322,8 @@ void NonlinearShell::approximate_tangent_product(const ShellState& coarse, doubl
                                                  Eigen::VectorXd& out) const {
   Eigen::MatrixXd remainder;
   tangent_product_rule(coarse_, coarse, pressure, v, remainder);
-  out = model_->stiffness() * v;
+  out = coarse_error_ * v;
   out += remainder.col(0);
-  out -= coarse_rest_ * v;
 }
 
 void NonlinearShell::tangent_product_rule(const Rule& rule, const ShellState& state, double pressure,
@@ -376,22 +380,18 @@ bool NonlinearShell::assemble_jacobian(const ShellState& state, double pressure,
 
 Eigen::VectorXd NonlinearShell::approximate_force_change(const ShellState& from, const ShellState& to) const {
   if (!has_jacobian_rule()) fail(ErrorCode::kInternal, "nonlinear shell: no coarse rule");
-  const Eigen::VectorXd step = to.displacement - from.displacement;
-  Eigen::VectorXd change = model_->stiffness() * step;
+  Eigen::VectorXd change = coarse_error_ * (to.displacement - from.displacement);
   change += to.internal_force - from.internal_force;
-  change -= coarse_rest_ * step;
   return change;
 }
 
-// K + (T_coarse - K_coarse(0)) value by value: all three are on K's pattern (assemble_rule).
+// T_coarse + (K - K_coarse(0)) value by value: both are on K's pattern (assemble_rule).
 void NonlinearShell::assemble_approximate_tangent(const ShellState& coarse, double pressure,
                                                   Eigen::SparseMatrix<double>& out) const {
   assemble_rule(coarse_, coarse, pressure, out);
-  const Eigen::SparseMatrix<double>& k = model_->stiffness();
-  const double* kv = k.valuePtr();
-  const double* rest = coarse_rest_.valuePtr();
+  const double* error = coarse_error_.valuePtr();
   double* v = out.valuePtr();
-  for (Eigen::Index i = 0; i < out.nonZeros(); ++i) v[i] += kv[i] - rest[i];
+  for (Eigen::Index i = 0; i < out.nonZeros(); ++i) v[i] += error[i];
 }
 
 void NonlinearShell::assemble_rule(const Rule& rule, const ShellState& state, double pressure,

@@ -89,7 +89,8 @@ class NonlinearShell {
   /// the model's exact K plus the nonlinear remainder integrated with the coarse rule. It is K at
   /// rest and differs from the exact tangent only by the coarse rule's error on the remainder, so
   /// Newton on it converges nearly as fast, while a product costs a pass over the coarse points
-  /// (far fewer than the model's where extraordinary vertices are refined) and two sparse products.
+  /// (far fewer than the model's where extraordinary vertices are refined) and one sparse product
+  /// (with K - K_coarse(0), kept).
   /// `coarse` is the state at the same displacement on the coarse rule (`evaluate_coarse`).
   bool evaluate_coarse(const Eigen::VectorXd& u, ShellState& coarse) const;
   void approximate_tangent_product(const ShellState& coarse, double pressure, const Eigen::VectorXd& v,
@@ -146,7 +147,9 @@ class NonlinearShell {
 
   std::shared_ptr<const ShellModel> model_;
   Rule fine_, coarse_;
-  Eigen::SparseMatrix<double> coarse_rest_;  // K integrated with the coarse rule (empty: no coarse rule)
+  // K minus K integrated with the coarse rule: the coarse rule's error on the linear part, which
+  // the approximate model adds back (empty: no coarse rule).
+  Eigen::SparseMatrix<double> coarse_error_;
   int workers(int requested) const;  // threads to use for `requested` (0 = all)
 
   std::shared_ptr<Executor> executor_;

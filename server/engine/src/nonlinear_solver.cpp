@@ -173,6 +173,10 @@ class Run {
   // The last step's change of the internal forces minus the change the approximate model predicts
   // (empty: not measured), on the DOFs not prescribed.
   Eigen::VectorXd miss_;
+  bool coarse_is_current() const {
+    return coarse_.valid && coarse_.displacement.size() == state_.displacement.size() &&
+           coarse_.displacement == state_.displacement;
+  }
   NonlinearStats stats_;
 };
 
@@ -296,8 +300,7 @@ void Run::prepare_penalty() {
 void Run::refresh_tangent() {
   const auto t0 = Clock::now();
   auto matrix = std::make_shared<Eigen::SparseMatrix<double>>();
-  if (shell_.has_jacobian_rule() && coarse_.valid && coarse_.displacement.size() == state_.displacement.size() &&
-      coarse_.displacement == state_.displacement) {
+  if (shell_.has_jacobian_rule() && coarse_is_current()) {
     shell_.assemble_approximate_tangent(coarse_, pressure_, *matrix);  // the coarse state is at hand
   } else if (!shell_.assemble_jacobian(state_, pressure_, *matrix)) {
     shell_.assemble_tangent(state_, pressure_, *matrix);
@@ -345,7 +348,7 @@ void Run::refresh_tangent() {
 // relative accuracy eta. If GMRES is slow, the preconditioner is refreshed at this state first.
 bool Run::newton_direction(const Eigen::VectorXd& r, const Eigen::VectorXd& g, double lambda, double eta,
                            Eigen::VectorXd& p) {
-  if (approximate_ && (coarse_.displacement.size() != u_.size() || coarse_.displacement != state_.displacement)) {
+  if (approximate_ && !coarse_is_current()) {
     if (!shell_.evaluate_coarse(state_.displacement, coarse_)) approximate_ = false;
   }
   if (approximate_) ++stats_.approximate_iterations;
@@ -499,9 +502,7 @@ bool Run::solve_step(double lambda, double tolerance) {
 // of the internal forces.
 void Run::measure_miss(const ShellState& next) {
   miss_.resize(0);
-  if (coarse_.displacement.size() != state_.displacement.size() || coarse_.displacement != state_.displacement) {
-    return;  // no coarse state at the step's start: nothing measured
-  }
+  if (!coarse_is_current()) return;  // no coarse state at the step's start: nothing measured
   ShellState coarse;
   if (!shell_.evaluate_coarse(next.displacement, coarse)) {
     approximate_ = false;
@@ -578,17 +579,6 @@ NonlinearSolution Run::run() {
   u_ = u0_;
   const NonlinearMemory* mem = memory_in_.get();
   const bool continues = mem && mem->end.size() == ndof && mem->end == u0_;
-  if (continues && mem->end_force.size() == ndof) {
-    // The last answer's forces: a drag step evaluates its predicted state next, not this one
-    // (one evaluation of the model's rule of the 6-7 a step costs).
-    r0_ = mem->end_force;
-  } else {
-    if (!evaluate(u_, state_)) {
-      fail(ErrorCode::kInvalidArgument,
-           "the initial displacement folds the surface onto itself (a zero or inverted area element)");
-    }
-    r0_ = state_.internal_force;
-  }
   path_of_fixed_ = std::make_unique<internal::PrescribedPath>(m.mesh(), problem_, u0_);
   d0_.resize(static_cast<Eigen::Index>(problem_.rows.size()));
   for (size_t k = 0; k < problem_.rows.size(); ++k) {
@@ -628,9 +618,16 @@ NonlinearSolution Run::run() {
   history_ = same_drag ? mem->history : decltype(history_){};
   if (!same_drag && at_rest) history_.push_back({Eigen::VectorXd::Zero(targets_.size()), u0_});  // rest answers the empty request
 
-  if (path_.size() != ndof && state_.displacement.size() != ndof && !evaluate(u_, state_)) {  // first_step needs it
-    fail(ErrorCode::kInvalidArgument,
-         "the initial displacement folds the surface onto itself (a zero or inverted area element)");
+  if (path_.size() == ndof && mem->end_force.size() == ndof) {
+    // A drag step with a predictor evaluates its predicted state first, not this one: the last
+    // answer's forces (one evaluation of the model's rule of the 6-7 a step costs).
+    r0_ = mem->end_force;
+  } else {
+    if (!evaluate(u_, state_)) {
+      fail(ErrorCode::kInvalidArgument,
+           "the initial displacement folds the surface onto itself (a zero or inverted area element)");
+    }
+    r0_ = state_.internal_force;
   }
   double lambda = 0.0, step = path_.size() == ndof ? 1.0 : first_step();
   std::vector<std::pair<double, Eigen::VectorXd>> converged{{0.0, u_}};
