@@ -15,6 +15,30 @@ namespace softshell::engine::internal {
 using namespace nonlinear_kernel;
 using V3 = Eigen::Vector3d;
 
+namespace {
+
+// A thread's scratch arrays for the element kernels, kept between elements and passes: fresh
+// zero-filled arrays per element were a memset of the size of the whole state per pass.
+struct Scratch {
+  std::vector<double> values, coef;  // 18 P each (the kernels write every entry they read)
+  std::vector<PieceView> pieces;    // the element's pieces
+};
+
+template <class Pieces>
+Scratch& thread_scratch(Eigen::Index points, const Pieces& pieces) {
+  thread_local Scratch scratch;
+  const auto size = static_cast<size_t>(18 * points);
+  if (scratch.values.size() < size) {
+    scratch.values.resize(size);
+    scratch.coef.resize(size);
+  }
+  scratch.pieces.clear();
+  for (const auto& pc : pieces) scratch.pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size});
+  return scratch;
+}
+
+}  // namespace
+
 int NonlinearShell::workers(int requested) const {
   const int most = executor_->concurrency();
   return requested > 0 ? std::min(requested, most) : most;
@@ -273,16 +297,14 @@ bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, S
     const auto m = static_cast<Eigen::Index>(e.indices.size());
     Eigen::MatrixX3d local(m, 3);
     for (Eigen::Index a = 0; a < m; ++a) local.row(a) = u.segment<3>(3 * e.indices[static_cast<size_t>(a)]).transpose();
-    std::vector<double> values(static_cast<size_t>(18 * p)), coef(static_cast<size_t>(18 * p));
-    std::vector<PieceView> pieces;
-    for (const Piece& pc : e.pieces) pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size});
+    Scratch& scratch = thread_scratch(p, e.pieces);
     element_force[ei].setZero(m, 3);
     if (with_pressure) element_pressure[ei].setZero(m, 3);
     double energy = 0.0, gradient = 0.0;
-    element_ok[ei] = element_forces(pieces.data(), pieces.size(), rule.bernstein_t.data(), p, m, local.data(),
-                                    rule.reference.data() + kRef * e.first_point,
-                                    state.points.data() + kState * e.first_point, with_pressure, values.data(),
-                                    coef.data(), element_force[ei].data(),
+    element_ok[ei] = element_forces(scratch.pieces.data(), scratch.pieces.size(), rule.bernstein_t.data(), p, m,
+                                    local.data(), rule.reference.data() + kRef * e.first_point,
+                                    state.points.data() + kState * e.first_point, with_pressure, scratch.values.data(),
+                                    scratch.coef.data(), element_force[ei].data(),
                                     with_pressure ? element_pressure[ei].data() : nullptr, energy, gradient);
     element_energy[ei] = energy;
     element_gradient[ei] = gradient;
@@ -339,16 +361,14 @@ void NonlinearShell::tangent_product_rule(const Rule& rule, const ShellState& st
     const auto p = e.points;
     const auto m = static_cast<Eigen::Index>(e.indices.size());
     Eigen::MatrixX3d local(m, 3);
-    std::vector<double> values(static_cast<size_t>(18 * p)), coef(static_cast<size_t>(18 * p));
-    std::vector<PieceView> pieces;
-    for (const Piece& pc : e.pieces) pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size});
+    Scratch& scratch = thread_scratch(p, e.pieces);
     Eigen::MatrixXd& result = element_out[ei];
     result.setZero(m, 3 * cols);
     for (Eigen::Index col = 0; col < cols; ++col) {
       for (Eigen::Index a = 0; a < m; ++a) local.row(a) = v.block<3, 1>(3 * e.indices[static_cast<size_t>(a)], col).transpose();
-      element_tangent(pieces.data(), pieces.size(), rule.bernstein_t.data(), p, m, local.data(),
+      element_tangent(scratch.pieces.data(), scratch.pieces.size(), rule.bernstein_t.data(), p, m, local.data(),
                       rule.reference.data() + kRef * e.first_point, state.points.data() + kState * e.first_point,
-                      pressure, values.data(), coef.data(), result.data() + 3 * col * m);
+                      pressure, scratch.values.data(), scratch.coef.data(), result.data() + 3 * col * m);
     }
   });
   out.setZero(ndof, cols);

@@ -170,6 +170,7 @@ class Run {
   // of the load step (set at the start of each, solve_step).
   bool approximate_ = false;
   ShellState coarse_;  // the state on the coarse rule, at state_'s displacement (when approximate_)
+  ShellState spare_, coarse_spare_;  // the last states replaced, their arrays reused by the next
   // The last step's change of the internal forces minus the change the approximate model predicts
   // (empty: not measured), on the DOFs not prescribed.
   Eigen::VectorXd miss_;
@@ -481,7 +482,7 @@ bool Run::solve_step(double lambda, double tolerance) {
     // The Newton step, whole: in a thin shell it often overshoots into large membrane forces
     // that the next step removes, so neither the force nor the energy is a useful merit. It is
     // shortened only if it folds the surface or multiplies the force a thousandfold.
-    ShellState trial;
+    ShellState& trial = spare_;  // its arrays reused: a state of the model's rule is tens of MB
     bool accepted = false;
     for (double alpha = 1.0; alpha > 1e-3 && !accepted; alpha *= 0.25) {
       const Eigen::VectorXd ut = u_ + alpha * p;
@@ -492,7 +493,7 @@ bool Run::solve_step(double lambda, double tolerance) {
     }
     if (!accepted) return false;
     if (approximate_) measure_miss(trial);
-    state_ = std::move(trial);
+    std::swap(state_, trial);
     fresh_ = false;
   }
 }
@@ -503,14 +504,14 @@ bool Run::solve_step(double lambda, double tolerance) {
 void Run::measure_miss(const ShellState& next) {
   miss_.resize(0);
   if (!coarse_is_current()) return;  // no coarse state at the step's start: nothing measured
-  ShellState coarse;
+  ShellState& coarse = coarse_spare_;
   if (!shell_.evaluate_coarse(next.displacement, coarse)) {
     approximate_ = false;
     return;
   }
   miss_ = (next.internal_force - state_.internal_force) - shell_.approximate_force_change(coarse_, coarse);
   for (int32_t dof : problem_.fixed) miss_[dof] = 0.0;
-  coarse_ = std::move(coarse);
+  std::swap(coarse_, coarse);
 }
 
 // The safety net, as on the linear solver's answers: before an answer leaves, the state it
