@@ -241,14 +241,14 @@ Eigen::Matrix3d cross_matrix(const V3& v) {
 // One element's internal forces (and pressure force per unit pressure) from its local
 // displacements u (m x 3), with the per-point reference and state arrays of its points. Scratch
 // arrays of 18P: values, coef. Returns false at a degenerate point.
-SOFTSHELL_HOT bool element_forces(const PieceView* pieces, size_t count, const double* bernstein, Eigen::Index p,
+SOFTSHELL_HOT bool element_forces(const PieceView* pieces, size_t count, Eigen::Index p,
                                   Eigen::Index m, const double* u, const double* reference, double* state,
                                   bool pressure, double* values, double* coef, double* force, double* pressure_force,
                                   double& energy, double& gradient) {
   const Eigen::Index stride = kRows * p;
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
-    piece_times(pc.w, pc.w_rows, pc.size, bernstein, pc.first, pc.points, p, m, 1, kRows, u, values);
+    piece_times(pc.w, pc.w_rows, pc.size, pc.bernstein, pc.first, pc.points, p, m, 1, kRows, u, values);
   }
   V3 d[5], c[kRows];
   for (Eigen::Index q = 0; q < p; ++q) {
@@ -265,22 +265,22 @@ SOFTSHELL_HOT bool element_forces(const PieceView* pieces, size_t count, const d
   }
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
-    piece_transpose_times(pc.w, pc.w_rows, pc.size, bernstein, pc.first, pc.points, p, m, 1, kRows, coef, force);
+    piece_transpose_times(pc.w, pc.w_rows, pc.size, pc.bernstein, pc.first, pc.points, p, m, 1, kRows, coef, force);
     if (pressure) {  // the N rows: the pressure force per unit pressure
-      piece_transpose_times(pc.w, pc.w_rows, pc.size, bernstein, pc.first, pc.points, p, m, 0, 1, coef, pressure_force);
+      piece_transpose_times(pc.w, pc.w_rows, pc.size, pc.bernstein, pc.first, pc.points, p, m, 0, 1, coef, pressure_force);
     }
   }
   return true;
 }
 
 // One element's tangent product for one vector (local values v, m x 3) into out (m x 3).
-SOFTSHELL_HOT void element_tangent(const PieceView* pieces, size_t count, const double* bernstein, Eigen::Index p,
+SOFTSHELL_HOT void element_tangent(const PieceView* pieces, size_t count, Eigen::Index p,
                                    Eigen::Index m, const double* v, const double* reference, const double* state,
                                    double pressure, double* values, double* coef, double* out) {
   const Eigen::Index stride = kRows * p;
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
-    piece_times(pc.w, pc.w_rows, pc.size, bernstein, pc.first, pc.points, p, m, 1, kRows, v, values);
+    piece_times(pc.w, pc.w_rows, pc.size, pc.bernstein, pc.first, pc.points, p, m, 1, kRows, v, values);
   }
   V3 d[5], c[kRows];
   for (Eigen::Index q = 0; q < p; ++q) {
@@ -298,7 +298,7 @@ SOFTSHELL_HOT void element_tangent(const PieceView* pieces, size_t count, const 
   const int first_row = pressure != 0.0 ? 0 : 1;  // the N rows only matter with a pressure
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
-    piece_transpose_times(pc.w, pc.w_rows, pc.size, bernstein, pc.first, pc.points, p, m, first_row, kRows, coef, out);
+    piece_transpose_times(pc.w, pc.w_rows, pc.size, pc.bernstein, pc.first, pc.points, p, m, first_row, kRows, coef, out);
   }
 }
 

@@ -38,19 +38,20 @@ constexpr int kOrder[kRows] = {0, 1, 1, 2, 2, 2};
 struct PieceView {
   const double* w;
   Eigen::Index w_rows, first, points;
-  double size;
+  double size;               // > 0: w holds Bernstein coefficients on a cell of this edge length
+  const double* bernstein;   // then the unit cell's basis at its points (16 values per point and row)
 };
 
 /// Internal forces (and the pressure force per unit pressure) of one element from its local
 /// displacements u (m x 3, column-major), with the per-point reference and state arrays of its
 /// points (the state is written). Scratch arrays values, coef of 18P. Returns false at a
 /// degenerate point.
-bool element_forces(const PieceView* pieces, size_t count, const double* bernstein, Eigen::Index p, Eigen::Index m,
+bool element_forces(const PieceView* pieces, size_t count, Eigen::Index p, Eigen::Index m,
                     const double* u, const double* reference, double* state, bool pressure, double* values,
                     double* coef, double* force, double* pressure_force, double& energy, double& gradient);
 
 /// out (m x 3) += the element's tangent product for local values v (m x 3).
-void element_tangent(const PieceView* pieces, size_t count, const double* bernstein, Eigen::Index p, Eigen::Index m,
+void element_tangent(const PieceView* pieces, size_t count, Eigen::Index p, Eigen::Index m,
                      const double* v, const double* reference, const double* state, double pressure, double* values,
                      double* coef, double* out);
 

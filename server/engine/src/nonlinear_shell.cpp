@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 
 #include <Eigen/Dense>
 
@@ -24,16 +26,19 @@ struct Scratch {
   std::vector<PieceView> pieces;    // the element's pieces
 };
 
-template <class Pieces>
-Scratch& thread_scratch(Eigen::Index points, const Pieces& pieces) {
+template <class Rule, class Element>
+Scratch& thread_scratch(const Rule& rule, const Element& e) {
   thread_local Scratch scratch;
-  const auto size = static_cast<size_t>(18 * points);
+  const auto size = static_cast<size_t>(18 * e.points);
   if (scratch.values.size() < size) {
     scratch.values.resize(size);
     scratch.coef.resize(size);
   }
   scratch.pieces.clear();
-  for (const auto& pc : pieces) scratch.pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size});
+  for (const auto& pc : e.pieces) {
+    const double* basis = pc.size > 0.0 ? rule.bernstein_t[static_cast<size_t>(pc.gauss)].data() : nullptr;
+    scratch.pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size, basis});
+  }
   return scratch;
 }
 
@@ -68,7 +73,8 @@ void NonlinearShell::for_each_element(const Rule& rule, Fn&& fn) const {
   }, threads);
 }
 
-void NonlinearShell::build_rule(const std::vector<Cell>& cells, int gauss, int threads, Rule& rule) const {
+void NonlinearShell::build_rule(const std::vector<Cell>& cells, const std::vector<int>& gauss, int threads,
+                                Rule& rule) const {
   const ShellModel& m = *model_;
   rule.elements.resize(cells.size());
   size_t points = 0;
@@ -79,12 +85,17 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, int gauss, int t
   }
   rule.points = points;
   rule.reference.assign(kRef * points, 0.0);
-  rule.gauss = gauss;
-  rule.bernstein = bernstein_basis(gauss);
-  rule.bernstein_t = rule.bernstein.transpose();
-  const Eigen::HouseholderQR<Eigen::MatrixXd> bernstein_qr(rule.bernstein);
-  std::vector<double> gp, gw;
-  gauss_legendre_01(gauss, gp, gw);
+  std::array<Eigen::HouseholderQR<Eigen::MatrixXd>, 11> bernstein_qr;
+  std::array<std::vector<double>, 11> gp;
+  for (int g : gauss) {
+    const auto at = static_cast<size_t>(g);
+    if (g < 2 || g > 10 || rule.bernstein[at].size() != 0) continue;
+    rule.bernstein[at] = bernstein_basis(g);
+    rule.bernstein_t[at] = rule.bernstein[at].transpose();
+    bernstein_qr[at].compute(rule.bernstein[at]);
+    std::vector<double> gw;
+    gauss_legendre_01(g, gp[at], gw);
+  }
   const Eigen::SparseMatrix<double>& k = m.stiffness();
   const Material& mat = m.material();
   const double t = mat.thickness;
@@ -127,10 +138,11 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, int gauss, int t
       }
       ref[34] = weight;
     }
-    // Pieces: each run of gauss^2 points that is a square cell of the rule (points at u0 + s g_i,
-    // v0 + s g_j, weights s^2 w_i w_j) and on which the basis is a bicubic polynomial to
-    // round-off keeps 16 Bernstein coefficients per control point instead of its weights.
-    const Eigen::Index cell_points = static_cast<Eigen::Index>(gauss) * gauss;
+    // Pieces: each run of g^2 points that is a square cell of a g-point Gauss rule (points at
+    // u0 + s x_i, v0 + s x_j) and on which the basis is a bicubic polynomial to round-off keeps 16
+    // Bernstein coefficients per control point instead of its weights (a ninth to a sixth of the
+    // bytes a pass streams). The cells of deep rings toward an extraordinary vertex have their own
+    // rule; the innermost cell there, which holds infinitely many rings, is not polynomial.
     auto take_weights = [&](Eigen::Index first, Eigen::Index count) {
       Piece piece;
       piece.first = first;
@@ -139,44 +151,60 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, int gauss, int t
       for (int d = 0; d < kRows; ++d) piece.w.middleRows(d * count, count) = basis.middleRows(d * p + first, count);
       return piece;
     };
-    // The cells with the face's rule come first (face_cells); the smaller rules of deep rings
-    // toward an extraordinary vertex after them fall in runs that are not square, or in the
-    // tail, and keep their weights.
-    Eigen::Index first = 0;
-    for (; first + cell_points <= p; first += cell_points) {
-      double area = 0.0;
-      for (Eigen::Index q = first; q < first + cell_points; ++q) area += cell.weights[static_cast<size_t>(q)];
-      const double size = std::sqrt(area);
-      const double u0 = cell.uvs[static_cast<size_t>(first)][0] - size * gp[0];
-      const double v0 = cell.uvs[static_cast<size_t>(first)][1] - size * gp[0];
-      bool square = size > 0.0;
-      for (Eigen::Index q = 0; q < cell_points && square; ++q) {
+    // The edge length of the square cell of g-point Gauss points starting at `first` (0: not one).
+    auto square_cell = [&](Eigen::Index first, int g) {
+      const std::vector<double>& x = gp[static_cast<size_t>(g)];
+      const auto& start = cell.uvs[static_cast<size_t>(first)];
+      const double size = (cell.uvs[static_cast<size_t>(first) + 1][0] - start[0]) / (x[1] - x[0]);
+      if (!(size > 0.0)) return 0.0;
+      const double u0 = start[0] - size * x[0], v0 = start[1] - size * x[0];
+      for (Eigen::Index q = 0; q < static_cast<Eigen::Index>(g) * g; ++q) {
         const auto& uv = cell.uvs[static_cast<size_t>(first + q)];
-        square = std::abs(uv[0] - (u0 + size * gp[static_cast<size_t>(q % gauss)])) <= 1e-12 &&
-                 std::abs(uv[1] - (v0 + size * gp[static_cast<size_t>(q / gauss)])) <= 1e-12;
-      }
-      Piece piece = take_weights(first, cell_points);
-      if (square) {
-        // Fit on the unit cell: derivatives of order k carry size^k.
-        Eigen::MatrixXd scaled = piece.w;
-        for (int d = 0; d < kRows; ++d) scaled.middleRows(d * cell_points, cell_points) *= std::pow(size, kOrder[d]);
-        const Eigen::MatrixXd coef = bernstein_qr.solve(scaled);
-        const Eigen::MatrixXd back = rule.bernstein * coef;
-        bool exact = true;
-        const double overall = scaled.cwiseAbs().maxCoeff();
-        for (int d = 0; d < kRows && exact; ++d) {
-          const auto block = scaled.middleRows(d * cell_points, cell_points);
-          const double top = std::max(block.cwiseAbs().maxCoeff(), 1e-6 * overall);
-          exact = (back.middleRows(d * cell_points, cell_points) - block).cwiseAbs().maxCoeff() <= 1e-13 * top;
-        }
-        if (exact) {
-          piece.w = coef;
-          piece.size = size;
+        if (std::abs(uv[0] - (u0 + size * x[static_cast<size_t>(q % g)])) > 1e-12 ||
+            std::abs(uv[1] - (v0 + size * x[static_cast<size_t>(q / g)])) > 1e-12) {
+          return 0.0;
         }
       }
-      e.pieces.push_back(std::move(piece));
+      return size;
+    };
+    // The piece's Bernstein coefficients if the basis is bicubic on it to round-off.
+    auto fit = [&](Piece& piece, int g, double size) {
+      const auto n = piece.points;
+      // Fit on the unit cell: derivatives of order k carry size^k.
+      Eigen::MatrixXd scaled = piece.w;
+      for (int d = 0; d < kRows; ++d) scaled.middleRows(d * n, n) *= std::pow(size, kOrder[d]);
+      const Eigen::MatrixXd coef = bernstein_qr[static_cast<size_t>(g)].solve(scaled);
+      const Eigen::MatrixXd back = rule.bernstein[static_cast<size_t>(g)] * coef;
+      const double overall = scaled.cwiseAbs().maxCoeff();
+      for (int d = 0; d < kRows; ++d) {
+        const auto block = scaled.middleRows(d * n, n);
+        const double top = std::max(block.cwiseAbs().maxCoeff(), 1e-6 * overall);
+        if ((back.middleRows(d * n, n) - block).cwiseAbs().maxCoeff() > 1e-11 * top) return;
+      }
+      piece.w = coef;
+      piece.size = size;
+      piece.gauss = g;
+    };
+    Eigen::Index first = 0, loose = 0;  // points [loose, first) go into one piece with weights
+    while (first < p) {
+      bool cell_found = false;
+      for (int g : gauss) {
+        const Eigen::Index n = static_cast<Eigen::Index>(g) * g;
+        if (g < 2 || g > 10 || first + n > p) continue;
+        const double size = square_cell(first, g);
+        if (size == 0.0) continue;
+        if (first > loose) e.pieces.push_back(take_weights(loose, first - loose));
+        Piece piece = take_weights(first, n);
+        fit(piece, g, size);
+        e.pieces.push_back(std::move(piece));
+        first += n;
+        loose = first;
+        cell_found = true;
+        break;
+      }
+      if (!cell_found) ++first;
     }
-    if (first < p) e.pieces.push_back(take_weights(first, p - first));
+    if (p > loose) e.pieces.push_back(take_weights(loose, p - loose));
     // Where each (a, b) block of the element lands in K's value array.
     e.offsets.resize(static_cast<size_t>(mm * mm));
     for (Eigen::Index bl = 0; bl < mm; ++bl) {
@@ -218,7 +246,8 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
     cells.back().uvs.push_back({quad[q].point.u, quad[q].point.v});
     cells.back().weights.push_back(quad[q].weight);
   }
-  shell->build_rule(cells, m.options().quadrature.gauss_points, threads, shell->fine_);
+  const QuadratureOptions& quadrature = m.options().quadrature;
+  shell->build_rule(cells, {quadrature.gauss_points, quadrature.ev_ring_gauss_points}, threads, shell->fine_);
   if (jacobian_gauss_points > 0) {
     std::vector<double> gp, gw;
     gauss_legendre_01(jacobian_gauss_points, gp, gw);
@@ -232,7 +261,7 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
         }
       }
     }
-    shell->build_rule(cells, jacobian_gauss_points, threads, shell->coarse_);
+    shell->build_rule(cells, {jacobian_gauss_points}, threads, shell->coarse_);
     ShellState rest;
     if (!shell->evaluate_rule(shell->coarse_, Eigen::VectorXd::Zero(m.num_dofs()), rest, false)) {
       fail(ErrorCode::kUnprocessable, "nonlinear shell: the limit surface is degenerate at a coarse quadrature point");
@@ -253,7 +282,7 @@ Eigen::MatrixXd NonlinearShell::element_basis(const Rule& rule, const Element& e
   for (const Piece& piece : e.pieces) {
     const Eigen::Index n = piece.points;
     if (piece.size > 0.0) {
-      const Eigen::MatrixXd w = rule.bernstein * piece.w;
+      const Eigen::MatrixXd w = rule.bernstein[static_cast<size_t>(piece.gauss)] * piece.w;
       for (int d = 0; d < kRows; ++d) {
         basis.middleRows(d * p + piece.first, n) = w.middleRows(d * n, n) / std::pow(piece.size, kOrder[d]);
       }
@@ -297,11 +326,11 @@ bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, S
     const auto m = static_cast<Eigen::Index>(e.indices.size());
     Eigen::MatrixX3d local(m, 3);
     for (Eigen::Index a = 0; a < m; ++a) local.row(a) = u.segment<3>(3 * e.indices[static_cast<size_t>(a)]).transpose();
-    Scratch& scratch = thread_scratch(p, e.pieces);
+    Scratch& scratch = thread_scratch(rule, e);
     element_force[ei].setZero(m, 3);
     if (with_pressure) element_pressure[ei].setZero(m, 3);
     double energy = 0.0, gradient = 0.0;
-    element_ok[ei] = element_forces(scratch.pieces.data(), scratch.pieces.size(), rule.bernstein_t.data(), p, m,
+    element_ok[ei] = element_forces(scratch.pieces.data(), scratch.pieces.size(), p, m,
                                     local.data(), rule.reference.data() + kRef * e.first_point,
                                     state.points.data() + kState * e.first_point, with_pressure, scratch.values.data(),
                                     scratch.coef.data(), element_force[ei].data(),
@@ -361,12 +390,12 @@ void NonlinearShell::tangent_product_rule(const Rule& rule, const ShellState& st
     const auto p = e.points;
     const auto m = static_cast<Eigen::Index>(e.indices.size());
     Eigen::MatrixX3d local(m, 3);
-    Scratch& scratch = thread_scratch(p, e.pieces);
+    Scratch& scratch = thread_scratch(rule, e);
     Eigen::MatrixXd& result = element_out[ei];
     result.setZero(m, 3 * cols);
     for (Eigen::Index col = 0; col < cols; ++col) {
       for (Eigen::Index a = 0; a < m; ++a) local.row(a) = v.block<3, 1>(3 * e.indices[static_cast<size_t>(a)], col).transpose();
-      element_tangent(scratch.pieces.data(), scratch.pieces.size(), rule.bernstein_t.data(), p, m, local.data(),
+      element_tangent(scratch.pieces.data(), scratch.pieces.size(), p, m, local.data(),
                       rule.reference.data() + kRef * e.first_point, state.points.data() + kState * e.first_point,
                       pressure, scratch.values.data(), scratch.coef.data(), result.data() + 3 * col * m);
     }

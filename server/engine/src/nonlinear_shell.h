@@ -112,6 +112,7 @@ class NonlinearShell {
     Eigen::Index first = 0;   // first point within the element
     Eigen::Index points = 0;
     double size = 0.0;        // > 0: w holds Bernstein coefficients (16 x m) on a cell of this edge length
+    int gauss = 0;            // and the cell has gauss x gauss points
     Eigen::MatrixXd w;        // otherwise the weights, 6 points x m: row d * points + q
   };
   struct Element {
@@ -125,9 +126,9 @@ class NonlinearShell {
     std::vector<Element> elements;
     std::vector<double> reference;  // per point, kPointReference doubles (see .cpp)
     size_t points = 0;
-    int gauss = 0;                  // Gauss points per direction of its cells
-    Eigen::MatrixXd bernstein;      // 6 gauss^2 x 16: the unit cell's bicubic basis at its points
-    Eigen::MatrixXd bernstein_t;    // its transpose (the 16 values at a point contiguous)
+    // By Gauss points per direction g of the cells' rules (those it has):
+    std::array<Eigen::MatrixXd, 11> bernstein;    // 6 g^2 x 16: the unit cell's bicubic basis at its points
+    std::array<Eigen::MatrixXd, 11> bernstein_t;  // its transpose (the 16 values at a point contiguous)
   };
   struct Cell {  // (face, sub-face) and its points
     int32_t face = 0, subface = 0;
@@ -136,7 +137,8 @@ class NonlinearShell {
   };
   NonlinearShell() = default;
 
-  void build_rule(const std::vector<Cell>& cells, int gauss, int threads, Rule& rule) const;
+  // `gauss`: the Gauss points per direction of the cells' rules (the face's first).
+  void build_rule(const std::vector<Cell>& cells, const std::vector<int>& gauss, int threads, Rule& rule) const;
   static Eigen::MatrixXd element_basis(const Rule& rule, const Element& e);  // 6P x m
   template <class Fn>
   void for_each_element(const Rule& rule, Fn&& fn) const;
