@@ -303,6 +303,30 @@ TEST(ServiceTest, LagrangeAndLimitConstraintsDisplaceTheLimitPointExactly) {
   }
 }
 
+// The nonlinear solver's memory (its quadrature basis, built by the first nonlinear solve, and the
+// last tangent factor) counts against the store's budget like the model's, and goes with the
+// geometry.
+TEST(ServiceTest, NonlinearSolverCountsAgainstTheMemoryBudget) {
+  Service s(small_options());
+  const size_t empty = s.stats().store_bytes;
+  const GeomId id = upload_ready(s, exact_grid(4));
+  DeformationRequest push = pinned_push(1);
+  const size_t before = s.stats().store_bytes;
+  ASSERT_TRUE(s.deform(id, push).get());
+  const size_t linear = s.stats().store_bytes;
+  push.model = DeformationModel::kNonlinear;
+  ASSERT_TRUE(s.deform(id, push).get());
+  const size_t nonlinear = s.stats().store_bytes;
+  // The same request's result again, and the basis: 16 faces x 16 Gauss points, each with 35
+  // doubles of reference data at least.
+  EXPECT_GE(nonlinear - linear, (linear - before) + 16 * 16 * 35 * sizeof(double));
+  // A second solve adds nothing but its result (the basis is built once; one factor is kept).
+  ASSERT_TRUE(s.deform(id, push).get());
+  EXPECT_LT(s.stats().store_bytes - nonlinear, 2 * (linear - before) + 64 * 1024);
+  ASSERT_TRUE(s.remove(id));
+  EXPECT_LT(s.stats().store_bytes, empty + 1024);  // what stays is the record that the id was deleted
+}
+
 // PROTOCOL.md v2 "The nonlinear model": a request with model = nonlinear is solved by the
 // nonlinear shell, stored in the same history and reported with its iterations and residual;
 // its stresses come from the Green-Lagrange strains. A rigid half-turn-ish rotation prescribed on

@@ -88,10 +88,11 @@ void add_options(CLI::App& app, Options& o) {
                  "least recently used factors are evicted to stay under it")
       ->envname("SOFTSHELL_CACHE_MB")->type_name("MIB")->check(range(1, 1LL << 24));
   app.add_option("--store-mb", o.store_mb,
-                 "memory budget in MiB for meshes, precomputed models, results,\n"
-                 "holds and event-stream followers (default: half the physical\n"
-                 "memory); an upload that does not fit is refused with 507; for a\n"
-                 "result, the geometry's oldest results are dropped first")
+                 "memory budget in MiB for meshes, precomputed models (linear and\n"
+                 "nonlinear), results, holds and event-stream followers (default:\n"
+                 "half the physical memory); an upload that does not fit is\n"
+                 "refused with 507; for a result, the geometry's oldest results\n"
+                 "are dropped first")
       ->envname("SOFTSHELL_STORE_MB")->type_name("MIB")->check(range(1, 1LL << 26));
   app.add_option("--max-body-mb", o.max_body_mb, "largest request body in MiB, 1..4096 (default 64); larger\nbodies get 413")
       ->envname("SOFTSHELL_MAX_BODY_MB")->type_name("MIB")->check(range(1, 4096));

@@ -273,6 +273,7 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
     double* error = shell->coarse_error_.valuePtr();
     for (Eigen::Index i = 0; i < coarse_rest.nonZeros(); ++i) error[i] -= coarse_rest.valuePtr()[i];
   }
+  shell->bytes_ = shell->count_bytes();
   return shell;
 }
 
@@ -293,7 +294,9 @@ Eigen::MatrixXd NonlinearShell::element_basis(const Rule& rule, const Element& e
   return basis;
 }
 
-size_t NonlinearShell::memory_bytes() const {
+size_t NonlinearShell::memory_bytes() const { return bytes_; }
+
+size_t NonlinearShell::count_bytes() const {
   size_t bytes = sizeof(*this);
   bytes += static_cast<size_t>(coarse_error_.nonZeros()) * (sizeof(double) + sizeof(int));
   for (const Rule* rule : {&fine_, &coarse_}) {

@@ -153,6 +153,8 @@ class NonlinearShell {
   // the approximate model adds back (empty: no coarse rule).
   Eigen::SparseMatrix<double> coarse_error_;
   int workers(int requested) const;  // threads to use for `requested` (0 = all)
+  size_t count_bytes() const;
+  size_t bytes_ = 0;  // memory_bytes(), counted when built
 
   std::shared_ptr<Executor> executor_;
   int threads_ = 0;

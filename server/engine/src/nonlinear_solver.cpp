@@ -713,6 +713,24 @@ std::shared_ptr<const internal::NonlinearShell> NonlinearSolver::shell() const {
   return shell_;
 }
 
+size_t NonlinearSolver::memory_bytes() const {
+  std::lock_guard lock(mutex_);
+  size_t bytes = sizeof(*this) + (shell_ ? shell_->memory_bytes() : 0);
+  if (memory_) {
+    const internal::NonlinearMemory& m = *memory_;
+    bytes += sizeof(m) + static_cast<size_t>(m.end.size() + m.end_force.size()) * sizeof(double);
+    for (const auto& [targets, u] : m.history) bytes += static_cast<size_t>(targets.size() + u.size()) * sizeof(double);
+    // The factor and its matrix are the last preconditioner's unless they are the linear ones,
+    // which the factor cache holds (and counts) and the model holds.
+    if (m.factor && !m.factor_is_k) bytes += m.factor->bytes();
+    if (m.matrix && !m.factor_is_k) {
+      bytes += static_cast<size_t>(m.matrix->nonZeros()) * (sizeof(double) + sizeof(int)) +
+               static_cast<size_t>(m.matrix->outerSize() + 1) * sizeof(int);
+    }
+  }
+  return bytes;
+}
+
 Result<NonlinearSolution> NonlinearSolver::solve(const DeformationRequest& request) const {
   return solve_from(request, nullptr);
 }

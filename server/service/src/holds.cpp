@@ -210,6 +210,7 @@ void Service::Impl::run_hold_solve(const std::shared_ptr<Entry>& e) {
   const HoldSolvers solvers{*solver, *nonlinear, warm.size() ? &warm : nullptr};
   BatchSolver solve(solvers, e->geometry->mesh.bounding_diagonal());
   BatchOutcome out = solve.run(committed, batch);
+  account_nonlinear(*e, *nonlinear);
   const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
   if (out.solves > 0) hold_solves.fetch_add(1);
   hold_changes_solved.fetch_add(batch.size());

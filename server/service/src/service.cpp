@@ -371,6 +371,14 @@ void Service::Impl::notify(Entry& e) {
   }
 }
 
+void Service::Impl::account_nonlinear(Entry& e, const engine::NonlinearSolver& nonlinear) {
+  const size_t bytes = nonlinear.memory_bytes();
+  std::lock_guard lock(e.mu);
+  if (e.deleted) return;  // its memory went with it
+  budget.resize(e.nonlinear_bytes, bytes);
+  e.nonlinear_bytes = bytes;
+}
+
 void Service::Impl::submit_solve(const std::shared_ptr<Entry>& e, std::shared_ptr<const engine::Solver> solver,
                                  DeformationRequest request, DeformCallback done) {
   solve_pool.submit([this, e, solver = std::move(solver), request = std::move(request),
@@ -390,6 +398,7 @@ void Service::Impl::submit_solve(const std::shared_ptr<Entry>& e, std::shared_pt
           nonlinear = e->nonlinear;
         }
         auto answer = nonlinear->solve(request);  // from rest: a request is solved alone
+        account_nonlinear(*e, *nonlinear);
         if (!answer) return answer.error();
         stored->nonlinear = answer->stats;
         return std::move(answer->displacement);
@@ -573,9 +582,10 @@ Result<void> Service::remove(const GeomId& id) {
     listeners.swap(e->listeners);
     results.swap(e->results);
     impl_->total_results.fetch_sub(results.size());
-    impl_->budget.release(e->reserved_bytes + e->result_bytes);
+    impl_->budget.release(e->reserved_bytes + e->result_bytes + e->nonlinear_bytes);
     e->reserved_bytes = 0;
     e->result_bytes = 0;
+    e->nonlinear_bytes = 0;
     model = std::move(e->model);
     e->solver.reset();
     e->nonlinear.reset();

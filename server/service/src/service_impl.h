@@ -144,6 +144,7 @@ struct Entry {
   uint32_t first_kept = 1;
   uint32_t first_of_life = 1;      // the first id of this upload (above a deleted upload's last)
   size_t result_bytes = 0;         // what the kept results count against the budget
+  size_t nonlinear_bytes = 0;      // what the nonlinear solver holds (its basis, last factor), as last counted
   uint32_t next_res_id() const { return first_kept + static_cast<uint32_t>(results.size()); }
   std::vector<Pending> pending;    // requests waiting for the precomputation
   HoldTable holds;
@@ -204,6 +205,10 @@ struct Service::Impl {
   bool claim_hold_solve_locked(Entry& e);
   void launch_hold_solve(const std::shared_ptr<Entry>& e);
   void run_hold_solve(const std::shared_ptr<Entry>& e);
+  // Counts what the geometry's nonlinear solver holds against the budget (after each of its
+  // solves: the first builds its basis). Kept even beyond the budget, as a model that turned out
+  // larger than estimated; later requests are refused instead.
+  void account_nonlinear(Entry& e, const engine::NonlinearSolver& nonlinear);
   // Ends a hold whose lease lapsed (from the lease timer).
   void expire_hold(const std::weak_ptr<Entry>& weak, const std::string& hold_id, uint64_t lease);
   // Answers every hold change that waits (shutdown; a failed precomputation, which also drops

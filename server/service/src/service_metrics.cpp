@@ -34,7 +34,7 @@ std::string Service::metrics_text() const {
   m.sample("softshell_factor_cache_events_total", PrometheusText::label("event", "hit"), d(s.cache.hits));
   m.sample("softshell_factor_cache_events_total", PrometheusText::label("event", "miss"), d(s.cache.misses));
   m.sample("softshell_factor_cache_events_total", PrometheusText::label("event", "eviction"), d(s.cache.evictions));
-  gauge("softshell_store_bytes", "Memory held for meshes, precomputed models, results, holds and followers.",
+  gauge("softshell_store_bytes", "Memory held for meshes, precomputed models (linear and nonlinear), results, holds and followers.",
         d(s.store_bytes));
   gauge("softshell_store_budget_bytes", "Budget of the store (--store-mb).", d(s.store_budget));
   counter("softshell_refused_no_memory_total", "Uploads, results, holds and followers refused by the store budget (507).",

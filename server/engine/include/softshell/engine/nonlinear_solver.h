@@ -118,6 +118,11 @@ class NonlinearSolver {
   const ShellModel& model() const { return *model_; }
   const NonlinearOptions& options() const { return options_; }
 
+  /// What the solver holds beyond the model: the quadrature basis of the nonlinear model (built
+  /// by the first solve; tens of MB for a few thousand DOFs) and what the last solve left for the
+  /// next (a tangent factor). For a host's memory budget.
+  size_t memory_bytes() const;
+
  private:
   std::shared_ptr<const internal::NonlinearShell> shell() const;
   Result<NonlinearSolution> solve_from(const DeformationRequest& request, const Eigen::VectorXd* initial) const;
