@@ -211,6 +211,38 @@ TEST(NonlinearSolver, RefusesWhatItCannotBringToEquilibrium) {
   EXPECT_EQ(bad.error().code, ErrorCode::kInvalidArgument);
 }
 
+// A time limit is a limit like the iteration count: a solve that has not converged when it runs
+// out is refused the same way, saying so; the limit must be a finite number >= 0.
+TEST(NonlinearSolver, RefusesWhatItCannotBringToEquilibriumInItsTime) {
+  Cantilever c;
+  auto model = ShellModel::build(c.mesh, material()).value();
+  DeformationRequest request;
+  request.vertex_constraints = c.clamp();
+  request.limit_constraints.push_back({c.tip(), Vec3(-0.3, 0.0, 0.3), {}, {}});
+  NonlinearOptions options;
+  options.time_limit_seconds = 1e-9;  // out before the first iteration
+  NonlinearSolver solver(model, std::make_shared<FactorCache>(), options);
+  auto solution = solver.solve(request);
+  ASSERT_FALSE(solution.ok());
+  EXPECT_EQ(solution.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(solution.error().message.find("time limit of 1e-09 s ran out"), std::string::npos)
+      << solution.error().message;
+  EXPECT_NE(solution.error().message.find("Try"), std::string::npos) << solution.error().message;
+  options.time_limit_seconds = 600.0;  // the same request converges within a generous one
+  auto converged = NonlinearSolver(model, std::make_shared<FactorCache>(), options).solve(request);
+  ASSERT_TRUE(converged.ok()) << converged.error().message;
+  for (double bad : {-1.0, std::nan(""), HUGE_VAL}) {
+    options.time_limit_seconds = bad;
+    try {
+      NonlinearSolver refused(model, std::make_shared<FactorCache>(), options);
+      ADD_FAILURE() << "time limit " << bad << " accepted";
+    } catch (const Exception& e) {
+      EXPECT_EQ(e.error().code, ErrorCode::kInvalidArgument);
+      EXPECT_NE(e.error().message.find("time_limit_seconds"), std::string::npos);
+    }
+  }
+}
+
 // The safety net on nonlinear answers: a converged answer passes its check (ratio <= 1, reported);
 // an answer corrupted just before the check (as a wrong state or a lost constraint would leave
 // it) is refused with a message saying what is off, never returned.

@@ -204,6 +204,9 @@ TEST(ServerAppTest, StopHasADeadlineAndASecondSignalStopsAtOnce) {
   Child bad({SOFTSHELL_SERVER_EXE, "--shutdown-timeout=-1"});
   EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
   EXPECT_NE(bad.drain_stderr().find("--shutdown-timeout"), std::string::npos);
+  Child bad_limit({SOFTSHELL_SERVER_EXE, "--nonlinear-time-limit=-1"});
+  EXPECT_EQ(bad_limit.wait(std::chrono::seconds(10)), 2);
+  EXPECT_NE(bad_limit.drain_stderr().find("--nonlinear-time-limit"), std::string::npos);
 }
 
 TEST(ServerAppTest, BusyPortIsAnError) {

@@ -303,6 +303,26 @@ TEST(ServiceTest, LagrangeAndLimitConstraintsDisplaceTheLimitPointExactly) {
   }
 }
 
+// A nonlinear solve has a time limit in the service (60 s by default): one that runs out is a 422
+// saying so, and nothing is stored (no result id is used).
+TEST(ServiceTest, NonlinearSolveOverItsTimeLimitIsRefused) {
+  EXPECT_EQ(ServiceOptions{}.nonlinear.time_limit_seconds, 60.0);
+  ServiceOptions o = small_options();
+  o.nonlinear.time_limit_seconds = 1e-9;
+  Service s(o);
+  const GeomId id = upload_ready(s, exact_grid(4));
+  DeformationRequest push = pinned_push(1);
+  push.model = DeformationModel::kNonlinear;
+  auto refused = s.deform(id, push).get();
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(refused.error().message.find("time limit"), std::string::npos) << refused.error().message;
+  push.model = DeformationModel::kLinear;
+  auto linear = s.deform(id, push).get();
+  ASSERT_TRUE(linear) << linear.error().message;
+  EXPECT_EQ((*linear)->res_id, 1u);
+}
+
 // The nonlinear solver's memory (its quadrature basis, built by the first nonlinear solve, and the
 // last tangent factor) counts against the store's budget like the model's, and goes with the
 // geometry.

@@ -65,6 +65,7 @@ struct Options {
   std::vector<std::string> cors_origins;
   std::string log_level = "info";
   double shutdown_timeout = 5.0;
+  double nonlinear_time_limit = 60.0;
   std::string auth_token_file;
   std::string data_dir;
 };
@@ -128,6 +129,10 @@ void add_options(CLI::App& app, Options& o) {
                  "let pages from origin O (e.g. http://localhost:3000, or *) call\n"
                  "the API (CORS); repeatable; off by default")
       ->envname("SOFTSHELL_CORS_ORIGIN")->type_name("O")->allow_extra_args(false);
+  app.add_option("--nonlinear-time-limit", o.nonlinear_time_limit,
+                 "seconds one nonlinear solve may take, 0..3600 (default 60; 0 = no\n"
+                 "limit); one that has not converged by then is refused with 422")
+      ->envname("SOFTSHELL_NONLINEAR_TIME_LIMIT")->type_name("S")->check(CLI::Range(0.0, 3600.0).description(""));
   app.add_option("--shutdown-timeout", o.shutdown_timeout,
                  "seconds a stop may take to finish what is running, 0..3600\n"
                  "(default 5); then the server exits anyway")
@@ -182,6 +187,7 @@ int main(int argc, char** argv) {
   service_options.precompute_threads = o.threads;
   if (o.solve_threads > 0) service_options.solve_threads = o.solve_threads;
   service_options.precompute_jobs = o.precompute_jobs;
+  service_options.nonlinear.time_limit_seconds = o.nonlinear_time_limit;
   if (o.cache_mb > 0) service_options.cache_bytes = o.cache_mb << 20;
   if (o.store_mb > 0) service_options.store_bytes = o.store_mb << 20;
   if (o.max_body_mb > 0) http_options.max_body_bytes = o.max_body_mb << 20;

@@ -149,6 +149,7 @@ class Run {
   std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>> history_;  // of the drag this solve continues
   Eigen::VectorXd path_;     // predicted du / dlambda (empty: none)
   double length_ = 1.0, force_floor_ = 0.0;
+  double reached_ = 0.0;  // the fraction of the request the load steps converged to so far
   std::shared_ptr<const NonlinearMemory> memory_in_, memory_out_;
 
   // Current state and preconditioner.
@@ -441,6 +442,10 @@ bool Run::solve_step(double lambda, double tolerance) {
   miss_.resize(0);
   for (int it = 0;; ++it) {
     if (options_.cancel && options_.cancel->load()) fail(ErrorCode::kCancelled, "the nonlinear solve was cancelled");
+    if (options_.time_limit_seconds > 0.0 && ms_between(start_, Clock::now()) > 1e3 * options_.time_limit_seconds) {
+      give_up(reached_, "its time limit of " + internal::format_number(options_.time_limit_seconds) +
+                          " s ran out; residual " + scientific(last_residual_));
+    }
     const Eigen::VectorXd r = residual(state_, lambda);
     const Eigen::VectorXd g = row_residual(u_, lambda);
     const double out = reactions_->out_of_balance(r).norm(), scale = force_scale(state_, lambda);
@@ -643,7 +648,7 @@ NonlinearSolution Run::run() {
     }
     if (path_.size() == ndof) u_ = u_start + (target - lambda) * path_;
     if (solve_step(target, target < 1.0 ? std::max(kStepTolerance, options_.tolerance) : options_.tolerance)) {
-      lambda = target;
+      lambda = reached_ = target;
       step = std::min(1.0, 2.0 * step);
       converged.push_back({lambda, u_});
       continue;
@@ -698,10 +703,11 @@ NonlinearSolver::NonlinearSolver(std::shared_ptr<const ShellModel> model, std::s
   if (!model_) fail(ErrorCode::kInvalidArgument, "NonlinearSolver needs a model");
   if (!cache_) cache_ = std::make_shared<FactorCache>();
   if (!(options_.tolerance > 0.0) || options_.tolerance >= 1.0 || options_.max_iterations < 1 ||
-      options_.max_load_steps < 1 || options_.tangent_gauss_points < 0 || options_.tangent_gauss_points > 10) {
+      options_.max_load_steps < 1 || options_.tangent_gauss_points < 0 || options_.tangent_gauss_points > 10 ||
+      !(options_.time_limit_seconds >= 0.0) || !std::isfinite(options_.time_limit_seconds)) {
     fail(ErrorCode::kInvalidArgument,
          "nonlinear options: tolerance must be in (0, 1), max_iterations and max_load_steps >= 1, "
-         "tangent_gauss_points 0..10");
+         "tangent_gauss_points 0..10, time_limit_seconds finite and >= 0");
   }
 }
 

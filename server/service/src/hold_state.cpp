@@ -1,6 +1,7 @@
 #include "hold_state.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <sstream>
@@ -239,9 +240,14 @@ Result<HoldSolution> solve_hold_state(const HoldSolvers& solvers, const Assemble
   if (state.merged.model == DeformationModel::kNonlinear) {
     const Eigen::VectorXd* previous = solvers.previous;
     if (previous && previous->size() != solvers.nonlinear.model().num_dofs()) previous = nullptr;
+    const auto start = std::chrono::steady_clock::now();
     auto answer = previous ? solvers.nonlinear.solve(state.merged, *previous) : solvers.nonlinear.solve(state.merged);
-    if (!answer && previous && answer.error().code == ErrorCode::kUnprocessable) {
-      answer = solvers.nonlinear.solve(state.merged);  // from rest, once
+    // From rest, once, unless the first try used up the time a solve may take.
+    const double limit = solvers.nonlinear.options().time_limit_seconds;
+    const bool out_of_time =
+        limit > 0.0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= limit;
+    if (!answer && previous && answer.error().code == ErrorCode::kUnprocessable && !out_of_time) {
+      answer = solvers.nonlinear.solve(state.merged);
     }
     if (!answer) return answer.error();
     out.displacement = std::move(answer->displacement);

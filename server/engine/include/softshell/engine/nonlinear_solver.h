@@ -53,6 +53,10 @@ struct NonlinearOptions {
   /// If set and it becomes true, a running solve stops at its next iteration with kCancelled
   /// (a server shutting down; the flag must outlive the solver).
   const std::atomic<bool>* cancel = nullptr;
+  /// Wall-clock seconds a solve may take (0 = no limit): one that has not converged by then stops
+  /// at its next iteration and is refused like one that reached the iteration limit
+  /// (kUnprocessable, with how far it got and what to try). The service sets 60 s.
+  double time_limit_seconds = 0.0;
 };
 
 /// What a nonlinear solve did.

@@ -99,8 +99,14 @@ struct ServiceOptions {
   /// of the service's own with `precompute_jobs + solve_threads` threads.
   std::shared_ptr<Executor> executor;
   /// Limits and tolerances of every nonlinear solve (`POST .../results` and hold states with
-  /// `model` = nonlinear).
-  engine::NonlinearOptions nonlinear;
+  /// `model` = nonlinear). A solve may take 60 s here (`time_limit_seconds`; the engine's own
+  /// default is no limit): one that has not converged by then is refused (422), so that one
+  /// request on a large mesh cannot hold a solver thread for minutes.
+  engine::NonlinearOptions nonlinear = [] {
+    engine::NonlinearOptions o;
+    o.time_limit_seconds = 60.0;
+    return o;
+  }();
   /// Where the service's messages go (precomputations started/finished/failed).
   Logger logger;
   /// Directory of the persistent store (created if missing); empty = everything in memory only.
