@@ -127,21 +127,22 @@ using V3 = Eigen::Vector3d;
         y[32 + k] += col[k] * u2;
       }
     }
+    // By coefficient, so that the loop runs over the points (no sums across a vector).
+    const Eigen::Index rows = kRows * n;
     for (int r = first_row; r < end_row; ++r) {
       const double scale = kOrder[r] == 0 ? 1.0 : kOrder[r] == 1 ? 1.0 / size : 1.0 / (size * size);
-      for (Eigen::Index q = 0; q < n; ++q) {
-        const double* __restrict b = bernstein + 16 * (r * n + q);  // the basis at point q, row r
-        double v0 = 0.0, v1 = 0.0, v2 = 0.0;
-        for (int k = 0; k < 16; ++k) {
-          const double bk = b[k];
-          v0 += bk * y[k];
-          v1 += bk * y[16 + k];
-          v2 += bk * y[32 + k];
+      double* __restrict d0 = values + r * p + first;
+      double* __restrict d1 = d0 + stride;
+      double* __restrict d2 = d0 + 2 * stride;
+      for (Eigen::Index q = 0; q < n; ++q) d0[q] = d1[q] = d2[q] = 0.0;
+      for (int k = 0; k < 16; ++k) {
+        const double* __restrict col = bernstein + k * rows + r * n;  // coefficient k at the points, row r
+        const double y0 = scale * y[k], y1 = scale * y[16 + k], y2 = scale * y[32 + k];
+        for (Eigen::Index q = 0; q < n; ++q) {
+          d0[q] += col[q] * y0;
+          d1[q] += col[q] * y1;
+          d2[q] += col[q] * y2;
         }
-        const Eigen::Index at = r * p + first + q;
-        values[at] = scale * v0;
-        values[stride + at] = scale * v1;
-        values[2 * stride + at] = scale * v2;
       }
     }
     return;
@@ -248,7 +249,7 @@ SOFTSHELL_HOT bool element_forces(const PieceView* pieces, size_t count, Eigen::
   const Eigen::Index stride = kRows * p;
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
-    piece_times(pc.w, pc.w_rows, pc.size, pc.bernstein, pc.first, pc.points, p, m, 1, kRows, u, values);
+    piece_times(pc.w, pc.w_rows, pc.size, pc.basis_by_coefficient, pc.first, pc.points, p, m, 1, kRows, u, values);
   }
   V3 d[5], c[kRows];
   for (Eigen::Index q = 0; q < p; ++q) {
@@ -265,9 +266,9 @@ SOFTSHELL_HOT bool element_forces(const PieceView* pieces, size_t count, Eigen::
   }
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
-    piece_transpose_times(pc.w, pc.w_rows, pc.size, pc.bernstein, pc.first, pc.points, p, m, 1, kRows, coef, force);
+    piece_transpose_times(pc.w, pc.w_rows, pc.size, pc.basis_by_point, pc.first, pc.points, p, m, 1, kRows, coef, force);
     if (pressure) {  // the N rows: the pressure force per unit pressure
-      piece_transpose_times(pc.w, pc.w_rows, pc.size, pc.bernstein, pc.first, pc.points, p, m, 0, 1, coef, pressure_force);
+      piece_transpose_times(pc.w, pc.w_rows, pc.size, pc.basis_by_point, pc.first, pc.points, p, m, 0, 1, coef, pressure_force);
     }
   }
   return true;
@@ -280,7 +281,7 @@ SOFTSHELL_HOT void element_tangent(const PieceView* pieces, size_t count, Eigen:
   const Eigen::Index stride = kRows * p;
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
-    piece_times(pc.w, pc.w_rows, pc.size, pc.bernstein, pc.first, pc.points, p, m, 1, kRows, v, values);
+    piece_times(pc.w, pc.w_rows, pc.size, pc.basis_by_coefficient, pc.first, pc.points, p, m, 1, kRows, v, values);
   }
   V3 d[5], c[kRows];
   for (Eigen::Index q = 0; q < p; ++q) {
@@ -298,7 +299,7 @@ SOFTSHELL_HOT void element_tangent(const PieceView* pieces, size_t count, Eigen:
   const int first_row = pressure != 0.0 ? 0 : 1;  // the N rows only matter with a pressure
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
-    piece_transpose_times(pc.w, pc.w_rows, pc.size, pc.bernstein, pc.first, pc.points, p, m, first_row, kRows, coef, out);
+    piece_transpose_times(pc.w, pc.w_rows, pc.size, pc.basis_by_point, pc.first, pc.points, p, m, first_row, kRows, coef, out);
   }
 }
 

@@ -39,7 +39,10 @@ struct PieceView {
   const double* w;
   Eigen::Index w_rows, first, points;
   double size;               // > 0: w holds Bernstein coefficients on a cell of this edge length
-  const double* bernstein;   // then the unit cell's basis at its points (16 values per point and row)
+  // Then the unit cell's bicubic basis at its points, 6 points x 16 (row d * points + q), stored
+  // by coefficient (column-major) and by point (its transpose: the 16 values of a row contiguous).
+  const double* basis_by_coefficient;
+  const double* basis_by_point;
 };
 
 /// Internal forces (and the pressure force per unit pressure) of one element from its local

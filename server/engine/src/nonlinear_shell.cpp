@@ -36,8 +36,11 @@ Scratch& thread_scratch(const Rule& rule, const Element& e) {
   }
   scratch.pieces.clear();
   for (const auto& pc : e.pieces) {
-    const double* basis = pc.size > 0.0 ? rule.bernstein_t[static_cast<size_t>(pc.gauss)].data() : nullptr;
-    scratch.pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size, basis});
+    const bool bernstein = pc.size > 0.0;
+    const auto g = static_cast<size_t>(pc.gauss);
+    scratch.pieces.push_back({pc.w.data(), pc.w.rows(), pc.first, pc.points, pc.size,
+                              bernstein ? rule.bernstein[g].data() : nullptr,
+                              bernstein ? rule.bernstein_t[g].data() : nullptr});
   }
   return scratch;
 }
