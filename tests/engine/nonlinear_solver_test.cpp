@@ -211,6 +211,38 @@ TEST(NonlinearSolver, RefusesWhatItCannotBringToEquilibrium) {
   EXPECT_EQ(bad.error().code, ErrorCode::kInvalidArgument);
 }
 
+// Pulling the strip's tip back toward the clamp and up compresses it far past its buckling load
+// from the first load step on: the compressed straight strip is an unstable equilibrium, and
+// Newton on its indefinite tangent stalled there (the solver refused most of these pulls, which
+// ones depending on round-off). The trust-region steps on the energy carry it to the bent strip,
+// which keeps its length (it bends, it does not shorten: the compressed straight strip would
+// be 0.1 long at the largest pull).
+TEST(NonlinearSolver, APullPastTheBucklingLoadEndsOnTheBentBranch) {
+  Cantilever c;
+  auto model = ShellModel::build(c.mesh, material()).value();
+  NonlinearSolver solver(model, std::make_shared<FactorCache>());
+  for (double back : {0.25, 0.28, 0.3}) {
+    DeformationRequest request;
+    request.vertex_constraints = c.clamp();
+    request.limit_constraints.push_back({c.tip(), Vec3(-back, 0.0, 0.3), {}, {}});
+    auto solution = solver.solve(request);
+    ASSERT_TRUE(solution.ok()) << "pulled back by " << back << ": " << solution.error().message;
+    EXPECT_LT(solution->stats.residual, 1e-8);
+    // The midline's length, from the limit surface at 64 points.
+    double length = 0.0;
+    Vec3 last;
+    for (int k = 0; k <= 64; ++k) {
+      const double x = 0.4 * k / 64.0;
+      const int32_t column = std::min(7, static_cast<int32_t>(x / 0.05));
+      const SurfacePoint p{8 * 2 + column, 0, x / 0.05 - column, 0.0};  // the faces along y = 0.1
+      const Vec3 at = model->evaluator().evaluate(p).position + limit_displacement(*model, solution->displacement, p);
+      if (k > 0) length += (at - last).norm();
+      last = at;
+    }
+    EXPECT_NEAR(length, 0.4, 0.004) << "pulled back by " << back;
+  }
+}
+
 // A time limit is a limit like the iteration count: a solve that has not converged when it runs
 // out is refused the same way, saying so; the limit must be a finite number >= 0.
 TEST(NonlinearSolver, RefusesWhatItCannotBringToEquilibriumInItsTime) {

@@ -3,8 +3,10 @@
 // the cached linear factor K at rest, later a tangent factored at a deformed state, refreshed
 // when the Krylov iterations stop converging fast. Load steps, chosen by the solver, when one
 // step is too large; a secant predictor between load steps and between the steps of a drag.
-// (About 670 lines: Newton, the preconditioner refresh, the load stepping and the answer's check
-// share one Run state; split, they would pass it around.)
+// Where Newton stalls far from an answer (past a buckling load), trust-region steps on the
+// potential energy until it is near one. (About 800 lines: Newton, the trust region, the
+// preconditioner refresh, the load stepping and the answer's check share one Run state; split,
+// they would pass it around.)
 //
 // Why not quasi-Newton or chord steps on an older factor: in a thin shell such steps drift off
 // the Newton path (a rotation linearized on the wrong tangent stretches the surface) and then
@@ -78,6 +80,7 @@ std::string scientific(double x) {
 
 constexpr int kMaxStepIterations = 30;     // Newton iterations per load step before it is split
 constexpr int kMaxKrylov = 24;             // GMRES iterations per Newton step
+constexpr int kMaxTrustSteps = 100;        // trust-region steps per load step
 constexpr double kStepTolerance = 1e-5;    // convergence of intermediate load steps
 constexpr double kMinLoadStep = 1.0 / 1024.0;
 // The first load step turns the surface by about this much (radians) in the linear estimate:
@@ -172,6 +175,20 @@ class Run {
   bool approximate_ = false;
   ShellState coarse_;  // the state on the coarse rule, at state_'s displacement (when approximate_)
   ShellState spare_, coarse_spare_;  // the last states replaced, their arrays reused by the next
+  // Trust-region steps on the potential energy while Newton stalls far from an answer (past a
+  // buckling load the tangent is indefinite and Newton jumps between branches): each minimizes
+  // the quadratic model of the energy in a region of the preconditioner's norm (Steihaug's
+  // truncated CG, which follows a direction of negative curvature to the region's edge) and is
+  // taken only if the energy falls as the model predicts, so the iteration goes down to a stable
+  // equilibrium; a step inside the region that the energy confirms hands back to Newton.
+  bool trust_ = false;
+  double radius_ = 0.0;  // in the norm sqrt(p^T M p), M the factored preconditioner's matrix
+  bool trust_region_step(const Eigen::VectorXd& r, double lambda);
+  double potential(const ShellState& s, double lambda) const {
+    double work = lambda * problem_.load.dot(s.displacement);
+    if (lambda < 1.0) work += (1.0 - lambda) * r0_.dot(s.displacement);
+    return s.energy - work;
+  }
   // The last step's change of the internal forces minus the change the approximate model predicts
   // (empty: not measured), on the DOFs not prescribed.
   Eigen::VectorXd miss_;
@@ -244,6 +261,75 @@ Eigen::VectorXd Run::tangent_times(const Eigen::VectorXd& v, double lambda) cons
   }
   for (int32_t dof : problem_.fixed) jv[dof] = 0.0;
   return jv;
+}
+
+// One trust-region step from state_ (r its out-of-balance force, the energy's negative gradient on
+// the free DOFs; the rows already met, and kept by the step): Steihaug-Toint CG on the tangent,
+// preconditioned and measured by the tangent factored at this state (positive definite: where the
+// tangent is not, the factor is of its shift toward K). Returns false when the region has shrunk
+// to nothing.
+bool Run::trust_region_step(const Eigen::VectorXd& r, double lambda) {
+  constexpr double kEta = 0.1;  // CG to a tenth of the force: far from an answer the region limits the step
+  if (!fresh_) refresh_tangent();
+  const KktOperator& norm = *kkt_;
+  const Eigen::VectorXd zero_rows = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(problem_.rows.size()));
+  const auto t0 = Clock::now();
+  Eigen::VectorXd res = r, z = norm.solve(res, zero_rows), d = z, p = Eigen::VectorXd::Zero(r.size());
+  for (int32_t dof : problem_.fixed) res[dof] = 0.0;
+  double rz = res.dot(z);
+  if (!(rz > 0.0)) return false;
+  // The first region: the preconditioner's own step for this force, or the norm of the strain
+  // energy if that is less (a step cannot release more than there is).
+  if (radius_ == 0.0) radius_ = std::min(std::sqrt(rz), std::sqrt(2.0 * std::max(state_.energy, 0.0)));
+  const double rz0 = rz;
+  double pp = 0.0, pd = 0.0, dd = rz;  // p^T M p, p^T M d, d^T M d
+  Eigen::VectorXd hp = Eigen::VectorXd::Zero(r.size());  // H p
+  bool edge = false;
+  for (int j = 0; j < 2 * kMaxKrylov; ++j) {
+    const Eigen::VectorXd hd = tangent_times(d, lambda);
+    ++stats_.krylov_iterations;
+    const double curvature = d.dot(hd);
+    const double alpha = curvature > 0.0 ? rz / curvature : 0.0;
+    if (curvature <= 0.0 || pp + 2.0 * alpha * pd + alpha * alpha * dd >= radius_ * radius_) {
+      // To the edge along d: tau >= 0 with |p + tau d|_M = radius.
+      const double tau = (-pd + std::sqrt(std::max(0.0, pd * pd + dd * (radius_ * radius_ - pp)))) / dd;
+      p += tau * d;
+      hp += tau * hd;
+      edge = true;
+      break;
+    }
+    p += alpha * d;
+    hp += alpha * hd;
+    res -= alpha * hd;
+    const Eigen::VectorXd z_next = norm.solve(res, zero_rows);
+    const double rz_next = res.dot(z_next);
+    pp += 2.0 * alpha * pd + alpha * alpha * dd;
+    if (rz_next <= kEta * kEta * rz0) break;
+    const double beta = rz_next / rz;
+    pd = beta * (pd + alpha * dd);
+    dd = rz_next + beta * beta * dd;
+    d = z_next + beta * d;
+    z = z_next;
+    rz = rz_next;
+  }
+  stats_.krylov_ms += ms_between(t0, Clock::now());
+  const double predicted = r.dot(p) - 0.5 * p.dot(hp);  // decrease of the quadratic model
+  ShellState& trial = spare_;
+  const Eigen::VectorXd ut = u_ + p;
+  const bool valid = evaluate(ut, trial);
+  const double actual = valid ? potential(state_, lambda) - potential(trial, lambda) : -1.0;
+  const double ratio = predicted > 0.0 ? actual / predicted : -1.0;
+  if (ratio > 0.1) {
+    u_ = ut;
+    if (approximate_) measure_miss(trial);
+    std::swap(state_, trial);
+    fresh_ = false;
+    if (ratio > 0.75 && edge) radius_ *= 2.0;
+    if (!edge && ratio > 0.75) trust_ = false;  // a step inside the region, confirmed: Newton again
+  } else {
+    radius_ *= 0.25;
+  }
+  return radius_ > 1e-12 * std::sqrt(rz0);
 }
 
 void Run::use_linear_factor() {
@@ -436,10 +522,15 @@ bool Run::solve_step(double lambda, double tolerance) {
     fresh_ = false;
   }
   double first_out = 0.0, previous = 1.0, eta_cap = 1e-3;
+  // The residuals of the last two iterations that started with the rows met (the stall test).
+  double last_met = HUGE_VAL, before_met = HUGE_VAL;
   // Each load step starts on the approximate tangent again: a slow iteration far from the last
   // step's answer says little about how good the approximation is near this one's.
   approximate_ = options_.approximate_directions && shell_.has_jacobian_rule();
   miss_.resize(0);
+  trust_ = false;
+  radius_ = 0.0;
+  int trust_steps = 0;
   for (int it = 0;; ++it) {
     if (options_.cancel && options_.cancel->load()) fail(ErrorCode::kCancelled, "the nonlinear solve was cancelled");
     if (options_.time_limit_seconds > 0.0 && ms_between(start_, Clock::now()) > 1e3 * options_.time_limit_seconds) {
@@ -453,15 +544,30 @@ bool Run::solve_step(double lambda, double tolerance) {
     last_residual_ = out / scale;
     if (last_residual_ <= tolerance && rows_ok) return true;
     if (it == 0) first_out = out;
-    // A step that has not gained two orders of magnitude in 20 iterations is too large.
-    if (it >= kMaxStepIterations || stats_.iterations >= options_.max_iterations ||
-        (it >= 20 && out > 1e-2 * first_out)) {
+    // A step that has not gained two orders of magnitude in 20 Newton iterations is too large;
+    // trust-region steps go on while they lower the energy, up to kMaxTrustSteps.
+    const int newton_steps = it - trust_steps;
+    if (newton_steps >= kMaxStepIterations || trust_steps >= kMaxTrustSteps ||
+        stats_.iterations >= options_.max_iterations || (!trust_ && newton_steps >= 20 && out > 1e-2 * first_out)) {
       return false;
     }
     ++stats_.iterations;
     // Forcing term: loose far from the answer, tight enough near it that the step lands below
     // the tolerance (Eisenstat-Walker-like, from the relative residual).
     const double res = last_residual_;
+    // Stalled far from an answer, the residual not halved in two iterations on the rows:
+    // trust-region steps (a conservative problem only: a follower pressure has no potential).
+    if (rows_ok && res > 1e-2 && res > 0.5 * before_met && pressure_ == 0.0) trust_ = true;
+    if (rows_ok) {
+      before_met = last_met;
+      last_met = res;
+    }
+    if (trust_) {
+      previous = res;
+      ++trust_steps;
+      if (!trust_region_step(r, lambda)) return false;
+      continue;
+    }
     // Thin shells need accurate Newton directions (measured: a flat plate turned rigidly needs
     // eta <= 1e-6, curved shells 1e-3): start at 1e-3 and tighten when Newton is slow. On the
     // approximate tangent, a slow iteration is blamed on what its residual is made of:
