@@ -265,12 +265,14 @@ Eigen::VectorXd Run::tangent_times(const Eigen::VectorXd& v, double lambda) cons
 
 // One trust-region step from state_ (r its out-of-balance force, the energy's negative gradient on
 // the free DOFs; the rows already met, and kept by the step): Steihaug-Toint CG on the tangent,
-// preconditioned and measured by the tangent factored at this state (positive definite: where the
-// tangent is not, the factor is of its shift toward K). Returns false when the region has shrunk
-// to nothing.
+// preconditioned and measured by the current factor (positive definite: where the tangent was not,
+// the factor is of its shift toward K), refreshed as for Newton's directions. Returns false when
+// the region has shrunk to nothing.
 bool Run::trust_region_step(const Eigen::VectorXd& r, double lambda) {
   constexpr double kEta = 0.1;  // CG to a tenth of the force: far from an answer the region limits the step
-  if (!fresh_) refresh_tangent();
+  // A new factor when the last step's CG iterations cost more than one (as for GMRES).
+  const double refresh_cost = refresh_ms_ > 0.0 ? refresh_ms_ : 2.0 * krylov_ms_;
+  if (!fresh_ && last_krylov_ > 3 && last_krylov_ * krylov_ms_ > refresh_cost) refresh_tangent();
   const KktOperator& norm = *kkt_;
   const Eigen::VectorXd zero_rows = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(problem_.rows.size()));
   const auto t0 = Clock::now();
@@ -285,9 +287,10 @@ bool Run::trust_region_step(const Eigen::VectorXd& r, double lambda) {
   double pp = 0.0, pd = 0.0, dd = rz;  // p^T M p, p^T M d, d^T M d
   Eigen::VectorXd hp = Eigen::VectorXd::Zero(r.size());  // H p
   bool edge = false;
+  int iterations = 0;
   for (int j = 0; j < 2 * kMaxKrylov; ++j) {
     const Eigen::VectorXd hd = tangent_times(d, lambda);
-    ++stats_.krylov_iterations;
+    ++iterations;
     const double curvature = d.dot(hd);
     const double alpha = curvature > 0.0 ? rz / curvature : 0.0;
     if (curvature <= 0.0 || pp + 2.0 * alpha * pd + alpha * alpha * dd >= radius_ * radius_) {
@@ -312,7 +315,11 @@ bool Run::trust_region_step(const Eigen::VectorXd& r, double lambda) {
     z = z_next;
     rz = rz_next;
   }
-  stats_.krylov_ms += ms_between(t0, Clock::now());
+  const double ms = ms_between(t0, Clock::now());
+  stats_.krylov_ms += ms;
+  stats_.krylov_iterations += iterations;
+  last_krylov_ = iterations;
+  krylov_ms_ = ms / iterations;
   const double predicted = r.dot(p) - 0.5 * p.dot(hp);  // decrease of the quadratic model
   ShellState& trial = spare_;
   const Eigen::VectorXd ut = u_ + p;
