@@ -182,6 +182,7 @@ class Run {
   // taken only if the energy falls as the model predicts, so the iteration goes down to a stable
   // equilibrium; a step inside the region that the energy confirms hands back to Newton.
   bool trust_ = false;
+  bool indefinite_ = false;  // the last refresh could not factor the tangent, only a shift of it
   double radius_ = 0.0;  // in the norm sqrt(p^T M p), M the factored preconditioner's matrix
   bool trust_region_step(const Eigen::VectorXd& r, double lambda);
   double potential(const ShellState& s, double lambda) const {
@@ -420,6 +421,7 @@ void Run::refresh_tangent() {
     added = rho;
     if (try_factor()) penalty_level_ = level;
   }
+  indefinite_ = !factor;  // even with the constraint penalty: the tangent itself is not definite
   for (double shift : {1e-4, 1e-2, 1.0}) {
     if (factor) break;
     *matrix += shift * model_->stiffness();
@@ -562,9 +564,15 @@ bool Run::solve_step(double lambda, double tolerance) {
     // Forcing term: loose far from the answer, tight enough near it that the step lands below
     // the tolerance (Eisenstat-Walker-like, from the relative residual).
     const double res = last_residual_;
-    // Stalled far from an answer, the residual not halved in two iterations on the rows:
-    // trust-region steps (a conservative problem only: a follower pressure has no potential).
-    if (rows_ok && res > 1e-2 && res > 0.5 * before_met && pressure_ == 0.0) trust_ = true;
+    // Stalled far from an answer (the residual not halved in two iterations on the rows) with an
+    // indefinite tangent (refactored here to know; Newton's next direction uses that factor):
+    // trust-region steps. (A conservative problem only: a follower pressure has no potential.)
+    // A stall on a definite tangent is the nonlinearity of a large rotation, where Newton is
+    // faster than steps on the energy (measured on the rigid turns of docs/accuracy.md).
+    if (!trust_ && rows_ok && res > 1e-2 && res > 0.5 * before_met && pressure_ == 0.0) {
+      if (!fresh_) refresh_tangent();
+      trust_ = indefinite_;
+    }
     if (rows_ok) {
       before_met = last_met;
       last_met = res;
