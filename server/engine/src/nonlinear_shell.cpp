@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 
 #include <Eigen/Dense>
 
@@ -90,9 +88,11 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, const std::vecto
   rule.reference.assign(kRef * points, 0.0);
   std::array<Eigen::HouseholderQR<Eigen::MatrixXd>, 11> bernstein_qr;
   std::array<std::vector<double>, 11> gp;
+  std::vector<int> cell_rules;  // the Gauss rules of cells a piece can be (2 points or more)
   for (int g : gauss) {
     const auto at = static_cast<size_t>(g);
     if (g < 2 || g > 10 || rule.bernstein[at].size() != 0) continue;
+    cell_rules.push_back(g);
     rule.bernstein[at] = bernstein_basis(g);
     rule.bernstein_t[at] = rule.bernstein[at].transpose();
     bernstein_qr[at].compute(rule.bernstein[at]);
@@ -191,9 +191,9 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, const std::vecto
     Eigen::Index first = 0, loose = 0;  // points [loose, first) go into one piece with weights
     while (first < p) {
       bool cell_found = false;
-      for (int g : gauss) {
+      for (int g : cell_rules) {
         const Eigen::Index n = static_cast<Eigen::Index>(g) * g;
-        if (g < 2 || g > 10 || first + n > p) continue;
+        if (first + n > p) continue;
         const double size = square_cell(first, g);
         if (size == 0.0) continue;
         if (first > loose) e.pieces.push_back(take_weights(loose, first - loose));

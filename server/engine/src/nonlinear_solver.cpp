@@ -130,6 +130,11 @@ class Run {
   void use_linear_factor();
   void prepare_penalty();
   void refresh_tangent();
+  // Refreshes when the last solve's Krylov iterations cost more than a new factor would.
+  void refresh_if_slow() {
+    const double refresh_cost = refresh_ms_ > 0.0 ? refresh_ms_ : 2.0 * krylov_ms_;  // a guess until measured
+    if (!fresh_ && last_krylov_ > 3 && last_krylov_ * krylov_ms_ > refresh_cost) refresh_tangent();
+  }
   double first_step();
   Eigen::VectorXd predicted_path(const std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>>& history) const;
   bool solve_step(double lambda, double tolerance);
@@ -271,9 +276,7 @@ Eigen::VectorXd Run::tangent_times(const Eigen::VectorXd& v, double lambda) cons
 // the region has shrunk to nothing.
 bool Run::trust_region_step(const Eigen::VectorXd& r, double lambda) {
   constexpr double kEta = 0.1;  // CG to a tenth of the force: far from an answer the region limits the step
-  // A new factor when the last step's CG iterations cost more than one (as for GMRES).
-  const double refresh_cost = refresh_ms_ > 0.0 ? refresh_ms_ : 2.0 * krylov_ms_;
-  if (!fresh_ && last_krylov_ > 3 && last_krylov_ * krylov_ms_ > refresh_cost) refresh_tangent();
+  refresh_if_slow();
   const KktOperator& norm = *kkt_;
   const Eigen::VectorXd zero_rows = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(problem_.rows.size()));
   const auto t0 = Clock::now();
@@ -450,9 +453,7 @@ bool Run::newton_direction(const Eigen::VectorXd& r, const Eigen::VectorXd& g, d
   }
   if (approximate_) ++stats_.approximate_iterations;
   for (int attempt = 0; attempt < 2; ++attempt) {
-    // Refresh when the last solve's Krylov iterations cost more than a new factor would.
-    const double refresh_cost = refresh_ms_ > 0.0 ? refresh_ms_ : 2.0 * krylov_ms_;  // a guess until measured
-    if (!fresh_ && last_krylov_ > 3 && last_krylov_ * krylov_ms_ > refresh_cost) refresh_tangent();
+    refresh_if_slow();
     const Eigen::VectorXd pc = g.isZero(0.0) ? Eigen::VectorXd::Zero(r.size())
                                              : kkt_->solve(Eigen::VectorXd::Zero(r.size()), g);
     Eigen::VectorXd rhs = r;
