@@ -65,7 +65,7 @@ struct Options {
   std::vector<std::string> cors_origins;
   std::string log_level = "info";
   double shutdown_timeout = 5.0;
-  double nonlinear_time_limit = 60.0;
+  double nonlinear_time_limit = softshell::service::ServiceOptions{}.nonlinear.time_limit_seconds;  // its default
   std::string auth_token_file;
   std::string data_dir;
 };
