@@ -139,6 +139,13 @@ class Run {
   Eigen::VectorXd predicted_path(const std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>>& history) const;
   bool solve_step(double lambda, double tolerance);
   void measure_miss(const ShellState& next);
+  // Takes the step to `next` (evaluated at its displacement); `next` keeps the old state's arrays.
+  void move_to(ShellState& next) {
+    u_ = next.displacement;
+    if (approximate_) measure_miss(next);
+    std::swap(state_, next);
+    fresh_ = false;
+  }
   double check_answer(const Eigen::VectorXd& u);
   [[noreturn]] void give_up(double lambda, const std::string& why) const;
 
@@ -280,9 +287,9 @@ bool Run::trust_region_step(const Eigen::VectorXd& r, double lambda) {
   const KktOperator& norm = *kkt_;
   const Eigen::VectorXd zero_rows = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(problem_.rows.size()));
   const auto t0 = Clock::now();
-  Eigen::VectorXd res = r, z = norm.solve(res, zero_rows), d = z, p = Eigen::VectorXd::Zero(r.size());
+  Eigen::VectorXd res = r, d = norm.solve(res, zero_rows), p = Eigen::VectorXd::Zero(r.size());
   for (int32_t dof : problem_.fixed) res[dof] = 0.0;
-  double rz = res.dot(z);
+  double rz = res.dot(d);
   if (!(rz > 0.0)) return false;
   // The first region: the preconditioner's own step for this force, or the norm of the strain
   // energy if that is less (a step cannot release more than there is).
@@ -316,7 +323,6 @@ bool Run::trust_region_step(const Eigen::VectorXd& r, double lambda) {
     pd = beta * (pd + alpha * dd);
     dd = rz_next + beta * beta * dd;
     d = z_next + beta * d;
-    z = z_next;
     rz = rz_next;
   }
   const double ms = ms_between(t0, Clock::now());
@@ -331,10 +337,7 @@ bool Run::trust_region_step(const Eigen::VectorXd& r, double lambda) {
   const double actual = valid ? potential(state_, lambda) - potential(trial, lambda) : -1.0;
   const double ratio = predicted > 0.0 ? actual / predicted : -1.0;
   if (ratio > 0.1) {
-    u_ = ut;
-    if (approximate_) measure_miss(trial);
-    std::swap(state_, trial);
-    fresh_ = false;
+    move_to(trial);
     if (ratio > 0.75 && edge) radius_ *= 2.0;
     if (!edge && ratio > 0.75) trust_ = false;  // a step inside the region, confirmed: Newton again
   } else {
@@ -616,12 +619,9 @@ bool Run::solve_step(double lambda, double tolerance) {
       if (!evaluate(ut, trial)) continue;
       const double out_t = reactions_->out_of_balance(residual(trial, lambda)).norm();
       accepted = out_t < 1e3 * std::max(out, 1e-6 * scale) || !rows_ok;
-      if (accepted) u_ = ut;
     }
     if (!accepted) return false;
-    if (approximate_) measure_miss(trial);
-    std::swap(state_, trial);
-    fresh_ = false;
+    move_to(trial);
   }
 }
 
