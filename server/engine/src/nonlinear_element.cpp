@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <type_traits>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -16,83 +18,192 @@ namespace {
 using V3 = Eigen::Vector3d;
 
 
-[[gnu::always_inline]] inline V3 sym_mul(const double* s, const V3& x) {
-  return V3(s[0] * x[0] + s[3] * x[1] + s[4] * x[2], s[3] * x[0] + s[1] * x[1] + s[5] * x[2],
-            s[4] * x[0] + s[5] * x[1] + s[2] * x[2]);
+// The point kernels work on several points at once: T is double (one point) or Lanes (four
+// consecutive points; the AVX2 build does them in one register each, the baseline in two SSE2
+// halves). The per-point arrays are stored by quantity (entry k of point q at k P + q), so that
+// the four points' values are one load.
+// (The helpers that pass Lanes by value are always inlined: no call crosses the two builds' ABIs.)
+#pragma GCC diagnostic ignored "-Wpsabi"
+using Lanes = double __attribute__((vector_size(32)));
+using LaneMask = long __attribute__((vector_size(32)));
+constexpr int kLanes = 4;
+
+template <class T>
+[[gnu::always_inline]] inline T load(const double* p) {
+  if constexpr (std::is_same_v<T, double>) {
+    return *p;
+  } else {
+    T v;
+    std::memcpy(&v, p, sizeof(T));
+    return v;
+  }
+}
+template <class T>
+[[gnu::always_inline]] inline void store(double* p, const T& v) {
+  if constexpr (std::is_same_v<T, double>) {
+    *p = v;
+  } else {
+    std::memcpy(p, &v, sizeof(T));
+  }
+}
+[[gnu::always_inline]] inline double lane_sqrt(double x) { return std::sqrt(x); }
+[[gnu::always_inline]] inline Lanes lane_sqrt(const Lanes& x) {
+  return Lanes{std::sqrt(x[0]), std::sqrt(x[1]), std::sqrt(x[2]), std::sqrt(x[3])};
+}
+[[gnu::always_inline]] inline double lane_max(double a, double b) { return a > b ? a : b; }
+[[gnu::always_inline]] inline Lanes lane_max(const Lanes& a, const Lanes& b) { return a > b ? a : b; }
+[[gnu::always_inline]] inline double largest(double a) { return a; }
+[[gnu::always_inline]] inline double largest(const Lanes& a) { return std::max(std::max(a[0], a[1]), std::max(a[2], a[3])); }
+[[gnu::always_inline]] inline double sum(double a) { return a; }
+[[gnu::always_inline]] inline double sum(const Lanes& a) { return (a[0] + a[1]) + (a[2] + a[3]); }
+[[gnu::always_inline]] inline bool all(bool m) { return m; }
+[[gnu::always_inline]] inline bool all(const LaneMask& m) { return (m[0] & m[1] & m[2] & m[3]) != 0; }
+
+// A 3-vector of one quantity at T's points.
+template <class T>
+struct P3 {
+  T x, y, z;
+};
+template <class T>
+[[gnu::always_inline]] inline P3<T> operator+(const P3<T>& a, const P3<T>& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+template <class T>
+[[gnu::always_inline]] inline P3<T> operator-(const P3<T>& a, const P3<T>& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+template <class T>
+[[gnu::always_inline]] inline P3<T> operator-(const P3<T>& a) { return {-a.x, -a.y, -a.z}; }
+template <class T>
+[[gnu::always_inline]] inline P3<T> operator*(const T& s, const P3<T>& a) { return {s * a.x, s * a.y, s * a.z}; }
+template <class T>
+[[gnu::always_inline]] inline P3<T> operator/(const P3<T>& a, const T& s) { return {a.x / s, a.y / s, a.z / s}; }
+template <class T>
+[[gnu::always_inline]] inline T dot(const P3<T>& a, const P3<T>& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+template <class T>
+[[gnu::always_inline]] inline P3<T> cross(const P3<T>& a, const P3<T>& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+template <class T>
+[[gnu::always_inline]] inline bool finite(const P3<T>& a) {
+  const T zero = (a.x - a.x) + (a.y - a.y) + (a.z - a.z);  // NaN unless every entry is finite
+  return all(zero == zero);
 }
 
-// Internal force coefficients of one point: f_A = sum_d N_A,d c[d] (c[0]: the pressure force per
-// unit pressure, w (a1 x a2), when asked for). d = displacement derivatives u,u u,v u,uu u,uv u,vv.
-// Returns false for a degenerate point.
-[[gnu::always_inline]] inline bool point_forces(const double* ref, const V3* d, bool pressure, double* state, V3* c, double& energy,
-                  double& gradient) {
-  const V3 A1 = load3(ref), A2 = load3(ref + 3), A11 = load3(ref + 6), A12 = load3(ref + 9), A22 = load3(ref + 12);
-  const V3 T3 = load3(ref + 15), N0 = load3(ref + 19);
-  const double J = ref[18];
-  const V3 &d1 = d[0], &d2 = d[1], &d11 = d[2], &d12 = d[3], &d22 = d[4];
-  const V3 a1 = A1 + d1, a2 = A2 + d2, a11 = A11 + d11, a12 = A12 + d12, a22 = A22 + d22;
-  gradient = std::max({gradient, d1.norm() / A1.norm(), d2.norm() / A2.norm()});
+// A point array stored by quantity: entry k of point q at base[k stride + q].
+template <class T>
+struct Column {
+  const double* base;
+  Eigen::Index stride;
+  [[gnu::always_inline]] T at(int k) const { return load<T>(base + k * stride); }
+  [[gnu::always_inline]] P3<T> vec(int k) const { return {at(k), at(k + 1), at(k + 2)}; }
+  // Packed symmetric 3 x 3 (00 11 22 01 02 12) from entry k, times x.
+  [[gnu::always_inline]] P3<T> sym_mul(int k, const P3<T>& x) const {
+    const T s0 = at(k), s1 = at(k + 1), s2 = at(k + 2), s3 = at(k + 3), s4 = at(k + 4), s5 = at(k + 5);
+    return {s0 * x.x + s3 * x.y + s4 * x.z, s3 * x.x + s1 * x.y + s5 * x.z, s4 * x.x + s5 * x.y + s2 * x.z};
+  }
+};
+template <class T>
+[[gnu::always_inline]] inline void store_vec(double* base, Eigen::Index stride, int k, const P3<T>& v) {
+  store(base + k * stride, v.x);
+  store(base + (k + 1) * stride, v.y);
+  store(base + (k + 2) * stride, v.z);
+}
+// Row r of a values or coefficients array (axes 6P apart) at T's points.
+template <class T>
+[[gnu::always_inline]] inline P3<T> row(const double* base, Eigen::Index p, Eigen::Index axes, int r) {
+  const double* b = base + r * p;
+  return {load<T>(b), load<T>(b + axes), load<T>(b + 2 * axes)};
+}
+template <class T>
+[[gnu::always_inline]] inline void store_row(double* base, Eigen::Index p, Eigen::Index axes, int r, const P3<T>& v) {
+  double* b = base + r * p;
+  store(b, v.x);
+  store(b + axes, v.y);
+  store(b + 2 * axes, v.z);
+}
+
+// Internal force coefficients at T's points (from point q: ref, values, state and coef point at
+// q's entries): f_A = sum_d N_A,d c_d, c_0 the pressure force per unit pressure w (a1 x a2) when
+// asked for. The displacement derivatives u,u u,v u,uu u,uv u,vv are values rows 1-5. `gradient`
+// gathers |u,a|^2 / |A_a|^2. Returns false for a degenerate point.
+template <class T>
+[[gnu::always_inline]] inline bool point_forces(const double* ref, const double* values, double* state, double* coef,
+                                                Eigen::Index p, double bending, bool pressure, T& energy, T& gradient) {
+  const Eigen::Index axes = kRows * p;
+  const Column<T> r{ref, p};
+  const P3<T> A1 = r.vec(0), A2 = r.vec(3), A11 = r.vec(6), A12 = r.vec(9), A22 = r.vec(12);
+  const P3<T> N0 = r.vec(15);
+  const T J = r.at(18);
+  const P3<T> T3 = J * N0;
+  const P3<T> d1 = row<T>(values, p, axes, 1), d2 = row<T>(values, p, axes, 2), d11 = row<T>(values, p, axes, 3),
+              d12 = row<T>(values, p, axes, 4), d22 = row<T>(values, p, axes, 5);
+  gradient = lane_max(gradient, lane_max(dot(d1, d1) / dot(A1, A1), dot(d2, d2) / dot(A2, A2)));
   // Green-Lagrange strains [E11, E22, 2 E12] without forming a.a - A.A.
-  const V3 e(A1.dot(d1) + 0.5 * d1.squaredNorm(), A2.dot(d2) + 0.5 * d2.squaredNorm(),
-             A1.dot(d2) + d1.dot(A2) + d1.dot(d2));
-  const V3 dt3 = d1.cross(A2) + A1.cross(d2) + d1.cross(d2);
-  const V3 t3 = T3 + dt3;
-  const double j = t3.norm();
-  if (!(j > 1e-12 * J) || !std::isfinite(j)) return false;
-  const V3 n = t3 / j;
+  const T half = T{} + 0.5;
+  const P3<T> e{dot(A1, d1) + half * dot(d1, d1), dot(A2, d2) + half * dot(d2, d2), dot(A1, d2) + dot(d1, A2) + dot(d1, d2)};
+  const P3<T> dt3 = cross(d1, A2) + cross(A1, d2) + cross(d1, d2);
+  const P3<T> t3 = T3 + dt3;
+  const T j = lane_sqrt(dot(t3, t3));
+  const T small = 1e-12 * J;
+  if (!all(j > small) || !all(j - j == T{})) return false;
+  const P3<T> n = t3 / j;
   // n - N = dt3 / j + N (J - j) / j, with J - j = (J^2 - j^2) / (J + j).
-  const double j_drop = -(2.0 * T3.dot(dt3) + dt3.squaredNorm()) / (J + j);
-  const V3 dn = dt3 / j + N0 * (j_drop / j);
+  const T j_drop = -(2.0 * dot(T3, dt3) + dot(dt3, dt3)) / (J + j);
+  const P3<T> dn = dt3 / j + (j_drop / j) * N0;
   // Curvature change B_ab - b_ab = -(A_ab . (n - N) + u,ab . n).
-  const V3 k(-(A11.dot(dn) + d11.dot(n)), -(A22.dot(dn) + d22.dot(n)), -2.0 * (A12.dot(dn) + d12.dot(n)));
-  const V3 nm = sym_mul(ref + 22, e), mm = sym_mul(ref + 28, k);
-  if (!nm.allFinite() || !mm.allFinite()) return false;
-  energy += 0.5 * (e.dot(nm) + k.dot(mm));
-  const V3 h = mm[0] * a11 + mm[1] * a22 + 2.0 * mm[2] * a12;
-  const V3 g = (h - n * n.dot(h)) / j;
-  c[0] = pressure ? V3(ref[34] * t3) : V3::Zero();
-  c[1] = nm[0] * a1 + nm[2] * a2 - a2.cross(g);
-  c[2] = nm[2] * a1 + nm[1] * a2 - g.cross(a1);
-  c[3] = -mm[0] * n;
-  c[4] = -2.0 * mm[2] * n;
-  c[5] = -mm[1] * n;
-  store3(state, a1);
-  store3(state + 3, a2);
-  store3(state + 6, a11);
-  store3(state + 9, a12);
-  store3(state + 12, a22);
-  store3(state + 15, n);
-  state[18] = j;
-  store3(state + 19, nm);
-  store3(state + 22, mm);
-  store3(state + 25, h);
-  store3(state + 28, g);
+  const P3<T> k{-(dot(A11, dn) + dot(d11, n)), -(dot(A22, dn) + dot(d22, n)), -2.0 * (dot(A12, dn) + dot(d12, n))};
+  const P3<T> nm = r.sym_mul(19, e), mm = (T{} + bending) * r.sym_mul(19, k);
+  if (!finite(nm) || !finite(mm)) return false;
+  energy += half * (dot(e, nm) + dot(k, mm));
+  const P3<T> a1 = A1 + d1, a2 = A2 + d2, a11 = A11 + d11, a12 = A12 + d12, a22 = A22 + d22;
+  const P3<T> h = mm.x * a11 + mm.y * a22 + (2.0 * mm.z) * a12;
+  const P3<T> g = (h - dot(n, h) * n) / j;
+  if (pressure) store_row(coef, p, axes, 0, r.at(25) * t3);
+  store_row(coef, p, axes, 1, nm.x * a1 + nm.z * a2 - cross(a2, g));
+  store_row(coef, p, axes, 2, nm.z * a1 + nm.y * a2 - cross(g, a1));
+  store_row(coef, p, axes, 3, -(mm.x * n));
+  store_row(coef, p, axes, 4, -((2.0 * mm.z) * n));
+  store_row(coef, p, axes, 5, -(mm.y * n));
+  if (state) {
+    store_vec(state, p, 0, a1);
+    store_vec(state, p, 3, a2);
+    store_vec(state, p, 6, a11);
+    store_vec(state, p, 9, a12);
+    store_vec(state, p, 12, a22);
+    store_vec(state, p, 15, n);
+    store(state + 18 * p, j);
+    store_vec(state, p, 19, nm);
+    store_vec(state, p, 22, mm);
+    store_vec(state, p, 25, h);
+    store_vec(state, p, 28, g);
+  }
   return true;
 }
 
-// The directional derivative of the coefficients of point_forces (minus `pressure` times the
-// pressure coefficient) for displacement derivatives v (v,u v,v v,uu v,uv v,vv).
-[[gnu::always_inline]] inline void point_tangent(const double* ref, const double* state, double pressure, const V3* v, V3* c) {
-  const V3 a1 = load3(state), a2 = load3(state + 3), a11 = load3(state + 6), a12 = load3(state + 9),
-           a22 = load3(state + 12), n = load3(state + 15);
-  const double j = state[18];
-  const V3 nm = load3(state + 19), mm = load3(state + 22), h = load3(state + 25), g = load3(state + 28);
-  const V3 &v1 = v[0], &v2 = v[1], &v11 = v[2], &v12 = v[3], &v22 = v[4];
-  const V3 de(a1.dot(v1), a2.dot(v2), a1.dot(v2) + a2.dot(v1));
-  const V3 dt3 = v1.cross(a2) + a1.cross(v2);
-  const double dj = n.dot(dt3);
-  const V3 dn = (dt3 - n * dj) / j;
-  const V3 dk(-(v11.dot(n) + a11.dot(dn)), -(v22.dot(n) + a22.dot(dn)), -2.0 * (v12.dot(n) + a12.dot(dn)));
-  const V3 dnm = sym_mul(ref + 22, de), dmm = sym_mul(ref + 28, dk);
-  const V3 dh = dmm[0] * a11 + dmm[1] * a22 + 2.0 * dmm[2] * a12 + mm[0] * v11 + mm[1] * v22 + 2.0 * mm[2] * v12;
-  const double hn = n.dot(h);
-  const V3 dg = (dh - dn * hn - n * (dn.dot(h) + n.dot(dh))) / j - g * (dj / j);
-  c[0] = -pressure * ref[34] * dt3;
-  c[1] = dnm[0] * a1 + dnm[2] * a2 + nm[0] * v1 + nm[2] * v2 - v2.cross(g) - a2.cross(dg);
-  c[2] = dnm[2] * a1 + dnm[1] * a2 + nm[2] * v1 + nm[1] * v2 - dg.cross(a1) - g.cross(v1);
-  c[3] = -(dmm[0] * n + mm[0] * dn);
-  c[4] = -2.0 * (dmm[2] * n + mm[2] * dn);
-  c[5] = -(dmm[1] * n + mm[1] * dn);
+// The directional derivative of point_forces' coefficients (minus `pressure` times the pressure
+// coefficient) for the direction's derivatives v,u v,v v,uu v,uv v,vv (values rows 1-5).
+template <class T>
+[[gnu::always_inline]] inline void point_tangent(const double* ref, const double* state, const double* values,
+                                                 double* coef, Eigen::Index p, double bending, double pressure) {
+  const Eigen::Index axes = kRows * p;
+  const Column<T> r{ref, p}, s{state, p};
+  const P3<T> a1 = s.vec(0), a2 = s.vec(3), a11 = s.vec(6), a12 = s.vec(9), a22 = s.vec(12), n = s.vec(15);
+  const T j = s.at(18);
+  const P3<T> nm = s.vec(19), mm = s.vec(22), h = s.vec(25), g = s.vec(28);
+  const P3<T> v1 = row<T>(values, p, axes, 1), v2 = row<T>(values, p, axes, 2), v11 = row<T>(values, p, axes, 3),
+              v12 = row<T>(values, p, axes, 4), v22 = row<T>(values, p, axes, 5);
+  const P3<T> de{dot(a1, v1), dot(a2, v2), dot(a1, v2) + dot(a2, v1)};
+  const P3<T> dt3 = cross(v1, a2) + cross(a1, v2);
+  const T dj = dot(n, dt3);
+  const P3<T> dn = (dt3 - dj * n) / j;
+  const P3<T> dk{-(dot(v11, n) + dot(a11, dn)), -(dot(v22, n) + dot(a22, dn)), -2.0 * (dot(v12, n) + dot(a12, dn))};
+  const P3<T> dnm = r.sym_mul(19, de), dmm = (T{} + bending) * r.sym_mul(19, dk);
+  const P3<T> dh = dmm.x * a11 + dmm.y * a22 + (2.0 * dmm.z) * a12 + mm.x * v11 + mm.y * v22 + (2.0 * mm.z) * v12;
+  const T hn = dot(n, h);
+  const P3<T> dg = (dh - hn * dn - (dot(dn, h) + dot(n, dh)) * n) / j - (dj / j) * g;
+  if (pressure != 0.0) store_row(coef, p, axes, 0, (-pressure * r.at(25)) * dt3);
+  store_row(coef, p, axes, 1, dnm.x * a1 + dnm.z * a2 + nm.x * v1 + nm.z * v2 - cross(v2, g) - cross(a2, dg));
+  store_row(coef, p, axes, 2, dnm.z * a1 + dnm.y * a2 + nm.z * v1 + nm.y * v2 - cross(dg, a1) - cross(g, v1));
+  store_row(coef, p, axes, 3, -(dmm.x * n + mm.x * dn));
+  store_row(coef, p, axes, 4, -((2.0 * dmm.z) * n + (2.0 * mm.z) * dn));
+  store_row(coef, p, axes, 5, -(dmm.y * n + mm.y * dn));
 }
 
 // The hot loops are compiled twice and picked at load time: for x86-64-v3 (AVX2, FMA) where the
@@ -107,12 +218,134 @@ using V3 = Eigen::Vector3d;
 // Per-element point arrays below are "row r P + q" (r the derivative, q the point), with the
 // three axes 6P apart.
 
+// The Bernstein pieces' passes, the bulk of a pass over the points, with the sums kept in
+// registers: 16 coefficients x 3 axes are 12 Lanes. `basis` is the unit cell's bicubic basis of an
+// n-point cell (n = g^2), by coefficient (column k: rows r n + q) for the forward pass and by point
+// (row r n + q: the 16 values) for the transposed one.
+
+// Derivative row r's factor on a cell of edge `size` (the basis is of the unit cell).
+[[gnu::always_inline]] inline double row_scale(int r, double size) {
+  return kOrder[r] == 0 ? 1.0 : kOrder[r] == 1 ? 1.0 / size : 1.0 / (size * size);
+}
+
+// y (3 axes x 16) = the piece's Bernstein coefficients of u: y[a][k] = sum_A w(k, A) u(A, a).
+[[gnu::always_inline]] inline void bernstein_coefficients(const double* __restrict w, Eigen::Index w_rows,
+                                                          Eigen::Index m, const double* __restrict u, double* y) {
+  Lanes s[3][4] = {};
+  for (Eigen::Index a = 0; a < m; ++a) {
+    const double* __restrict col = w + a * w_rows;
+    const double u0 = u[a], u1 = u[m + a], u2 = u[2 * m + a];
+    _Pragma("GCC unroll 16")
+    for (int i = 0; i < 4; ++i) {
+      const Lanes c = load<Lanes>(col + 4 * i);
+      s[0][i] += c * u0;
+      s[1][i] += c * u1;
+      s[2][i] += c * u2;
+    }
+  }
+  _Pragma("GCC unroll 16")
+  for (int ax = 0; ax < 3; ++ax) {
+    _Pragma("GCC unroll 16")
+    for (int i = 0; i < 4; ++i) store(y + 16 * ax + 4 * i, s[ax][i]);
+  }
+}
+
+// values rows first_row <= r < end_row at the piece's n points from its coefficients y.
+template <int N>
+[[gnu::always_inline]] inline void bernstein_values(const double* __restrict y, double size,
+                                                    const double* __restrict basis, Eigen::Index first,
+                                                    Eigen::Index p, int first_row, int end_row,
+                                                    double* __restrict values) {
+  constexpr int kChunks = N / kLanes, kTail = N % kLanes;
+  const Eigen::Index axes = kRows * p;
+  for (int r = first_row; r < end_row; ++r) {
+    const double scale = row_scale(r, size);
+    Lanes acc[3][kChunks] = {};
+    double tail[3][kTail > 0 ? kTail : 1] = {};
+    for (int k = 0; k < 16; ++k) {
+      const double* __restrict col = basis + k * (kRows * N) + r * N;
+      const double y0 = y[k], y1 = y[16 + k], y2 = y[32 + k];
+      _Pragma("GCC unroll 16")
+      for (int i = 0; i < kChunks; ++i) {
+        const Lanes b = load<Lanes>(col + kLanes * i);
+        acc[0][i] += b * y0;
+        acc[1][i] += b * y1;
+        acc[2][i] += b * y2;
+      }
+      _Pragma("GCC unroll 16")
+      for (int t = 0; t < kTail; ++t) {
+        tail[0][t] += col[kLanes * kChunks + t] * y0;
+        tail[1][t] += col[kLanes * kChunks + t] * y1;
+        tail[2][t] += col[kLanes * kChunks + t] * y2;
+      }
+    }
+    double* __restrict out = values + r * p + first;
+    _Pragma("GCC unroll 16")
+    for (int ax = 0; ax < 3; ++ax) {
+      _Pragma("GCC unroll 16")
+      for (int i = 0; i < kChunks; ++i) store(out + ax * axes + kLanes * i, scale * acc[ax][i]);
+      _Pragma("GCC unroll 16")
+      for (int t = 0; t < kTail; ++t) out[ax * axes + kLanes * kChunks + t] = scale * tail[ax][t];
+    }
+  }
+}
+
+// f (m x 3) += the piece's share of W^T coef over rows first_row <= r < end_row.
+template <int N>
+[[gnu::always_inline]] inline void bernstein_transpose(const double* __restrict w, Eigen::Index w_rows,
+                                                       Eigen::Index m, double size, const double* __restrict basis,
+                                                       Eigen::Index first, Eigen::Index p, int first_row,
+                                                       int end_row, const double* __restrict coef,
+                                                       double* __restrict f) {
+  const Eigen::Index axes = kRows * p;
+  Lanes z[3][4] = {};
+  for (int r = first_row; r < end_row; ++r) {
+    const double scale = row_scale(r, size);
+    const double* __restrict c = coef + r * p + first;
+    for (int q = 0; q < N; ++q) {
+      const double* __restrict b = basis + 16 * (r * N + q);
+      const double c0 = scale * c[q], c1 = scale * c[axes + q], c2 = scale * c[2 * axes + q];
+      _Pragma("GCC unroll 16")
+      for (int i = 0; i < 4; ++i) {
+        const Lanes bi = load<Lanes>(b + 4 * i);
+        z[0][i] += bi * c0;
+        z[1][i] += bi * c1;
+        z[2][i] += bi * c2;
+      }
+    }
+  }
+  for (Eigen::Index a = 0; a < m; ++a) {
+    const double* __restrict col = w + a * w_rows;
+    Lanes s0{}, s1{}, s2{};
+    _Pragma("GCC unroll 16")
+    for (int i = 0; i < 4; ++i) {
+      const Lanes ci = load<Lanes>(col + 4 * i);
+      s0 += ci * z[0][i];
+      s1 += ci * z[1][i];
+      s2 += ci * z[2][i];
+    }
+    f[a] += sum(s0);
+    f[m + a] += sum(s1);
+    f[2 * m + a] += sum(s2);
+  }
+}
+
 // values = W u for one piece's points, rows first_row <= r < end_row (u: m x 3, column-major).
 [[gnu::always_inline]] inline void piece_times(const double* __restrict w, Eigen::Index w_rows, double size,
                                                const double* __restrict bernstein, Eigen::Index first,
                                                Eigen::Index n, Eigen::Index p, Eigen::Index m, int first_row,
                                                int end_row, const double* __restrict u, double* __restrict values) {
   const Eigen::Index stride = kRows * p;
+  if (size > 0.0 && (n == 16 || n == 9)) {
+    double y[48];
+    bernstein_coefficients(w, w_rows, m, u, y);
+    if (n == 16) {
+      bernstein_values<16>(y, size, bernstein, first, p, first_row, end_row, values);
+    } else {
+      bernstein_values<9>(y, size, bernstein, first, p, first_row, end_row, values);
+    }
+    return;
+  }
   if (size > 0.0) {
     // Bernstein coefficients of the patch: y = R u (16 x 3), then the unit-cell basis scaled to
     // the cell's size.
@@ -172,6 +405,14 @@ using V3 = Eigen::Vector3d;
                                                          int end_row, const double* __restrict coef,
                                                          double* __restrict f) {
   const Eigen::Index stride = kRows * p;
+  if (size > 0.0 && n == 16) {
+    bernstein_transpose<16>(w, w_rows, m, size, bernstein, first, p, first_row, end_row, coef, f);
+    return;
+  }
+  if (size > 0.0 && n == 9) {
+    bernstein_transpose<9>(w, w_rows, m, size, bernstein, first, p, first_row, end_row, coef, f);
+    return;
+  }
   if (size > 0.0) {
     double z[48];
     for (int k = 0; k < 48; ++k) z[k] = 0.0;
@@ -243,27 +484,28 @@ Eigen::Matrix3d cross_matrix(const V3& v) {
 // displacements u (m x 3), with the per-point reference and state arrays of its points. Scratch
 // arrays of 18P: values, coef. Returns false at a degenerate point.
 SOFTSHELL_HOT bool element_forces(const PieceView* pieces, size_t count, Eigen::Index p,
-                                  Eigen::Index m, const double* u, const double* reference, double* state,
-                                  bool pressure, double* values, double* coef, double* force, double* pressure_force,
-                                  double& energy, double& gradient) {
-  const Eigen::Index stride = kRows * p;
+                                  Eigen::Index m, const double* u, const double* reference, double bending,
+                                  double* state, bool pressure, double* values, double* coef, double* force,
+                                  double* pressure_force, double& energy, double& gradient) {
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
     piece_times(pc.w, pc.w_rows, pc.size, pc.basis_by_coefficient, pc.first, pc.points, p, m, 1, kRows, u, values);
   }
-  V3 d[5], c[kRows];
-  for (Eigen::Index q = 0; q < p; ++q) {
-    for (int r = 0; r < 5; ++r) {
-      const Eigen::Index at = (r + 1) * p + q;
-      d[r] = V3(values[at], values[stride + at], values[2 * stride + at]);
-    }
-    if (!point_forces(reference + kRef * q, d, pressure, state + kState * q, c, energy, gradient)) return false;
-    for (int r = 0; r < kRows; ++r) {
-      coef[r * p + q] = c[r][0];
-      coef[stride + r * p + q] = c[r][1];
-      coef[2 * stride + r * p + q] = c[r][2];
+  Lanes lanes_energy{}, lanes_gradient{};
+  double point_energy = 0.0, point_gradient = 0.0;
+  Eigen::Index q = 0;
+  for (; q + kLanes <= p; q += kLanes) {
+    if (!point_forces<Lanes>(reference + q, values + q, state ? state + q : nullptr, coef + q, p, bending, pressure, lanes_energy, lanes_gradient)) {
+      return false;
     }
   }
+  for (; q < p; ++q) {
+    if (!point_forces<double>(reference + q, values + q, state ? state + q : nullptr, coef + q, p, bending, pressure, point_energy, point_gradient)) {
+      return false;
+    }
+  }
+  energy += sum(lanes_energy) + point_energy;
+  gradient = std::max(gradient, std::sqrt(std::max(largest(lanes_gradient), point_gradient)));
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
     piece_transpose_times(pc.w, pc.w_rows, pc.size, pc.basis_by_point, pc.first, pc.points, p, m, 1, kRows, coef, force);
@@ -276,26 +518,15 @@ SOFTSHELL_HOT bool element_forces(const PieceView* pieces, size_t count, Eigen::
 
 // One element's tangent product for one vector (local values v, m x 3) into out (m x 3).
 SOFTSHELL_HOT void element_tangent(const PieceView* pieces, size_t count, Eigen::Index p,
-                                   Eigen::Index m, const double* v, const double* reference, const double* state,
-                                   double pressure, double* values, double* coef, double* out) {
-  const Eigen::Index stride = kRows * p;
+                                   Eigen::Index m, const double* v, const double* reference, double bending,
+                                   const double* state, double pressure, double* values, double* coef, double* out) {
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
     piece_times(pc.w, pc.w_rows, pc.size, pc.basis_by_coefficient, pc.first, pc.points, p, m, 1, kRows, v, values);
   }
-  V3 d[5], c[kRows];
-  for (Eigen::Index q = 0; q < p; ++q) {
-    for (int r = 0; r < 5; ++r) {
-      const Eigen::Index at = (r + 1) * p + q;
-      d[r] = V3(values[at], values[stride + at], values[2 * stride + at]);
-    }
-    point_tangent(reference + kRef * q, state + kState * q, pressure, d, c);
-    for (int r = 0; r < kRows; ++r) {
-      coef[r * p + q] = c[r][0];
-      coef[stride + r * p + q] = c[r][1];
-      coef[2 * stride + r * p + q] = c[r][2];
-    }
-  }
+  Eigen::Index q = 0;
+  for (; q + kLanes <= p; q += kLanes) point_tangent<Lanes>(reference + q, state + q, values + q, coef + q, p, bending, pressure);
+  for (; q < p; ++q) point_tangent<double>(reference + q, state + q, values + q, coef + q, p, bending, pressure);
   const int first_row = pressure != 0.0 ? 0 : 1;  // the N rows only matter with a pressure
   for (size_t i = 0; i < count; ++i) {
     const PieceView& pc = pieces[i];
@@ -316,7 +547,7 @@ SOFTSHELL_HOT void element_tangent(const PieceView* pieces, size_t count, Eigen:
 //    with E1 = -[a2]x, E2 = [a1]x (the change of a1 x a2 per unit change of a1, a2), e1n = E1^T n,
 //    e1g = E1^T g and so on, P = I - n n^T.
 void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen::Index m, const double* reference,
-                            const double* state, double pressure, Eigen::MatrixXd& ke) {
+                            double bending, const double* state, double pressure, Eigen::MatrixXd& ke) {
   Eigen::MatrixXd g(6 * p, 3 * m), w6(6, m);
   SurfaceFrame frame;
   const int channels = pressure != 0.0 ? 4 : 3;
@@ -325,9 +556,10 @@ void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen:
   auto block = [&](int c, int d, Eigen::Index q) -> Eigen::Matrix3d& {
     return blocks[static_cast<size_t>((c * channels + d) * p + q)];
   };
+  double ref[kRef], st[kState];  // the point's entries (stored by quantity)
   for (Eigen::Index q = 0; q < p; ++q) {
-    const double* ref = reference + kRef * q;
-    const double* st = state + kState * q;
+    for (int k = 0; k < kRef; ++k) ref[k] = reference[k * p + q];
+    for (int k = 0; k < kState; ++k) st[k] = state[k * p + q];
     for (int d = 0; d < kRows; ++d) w6.row(d) = basis.row(d * p + q);
     frame.a1 = load3(st);
     frame.a2 = load3(st + 3);
@@ -337,11 +569,11 @@ void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen:
     frame.a3 = load3(st + 15);
     frame.j = st[18];
     Eigen::Matrix3d dm;
-    dm << ref[22], ref[25], ref[26], ref[25], ref[23], ref[27], ref[26], ref[27], ref[24];
+    dm << ref[19], ref[22], ref[23], ref[22], ref[20], ref[24], ref[23], ref[24], ref[21];
     const Eigen::LLT<Eigen::Matrix3d> factor(dm);
     const Eigen::Matrix3d um = factor.matrixU();
-    const double bending = std::sqrt(ref[28] / ref[22]);  // (t^3 / 12) / t, the same for every entry
-    weighted_strain_rows(w6, frame, um, bending * um, g.middleRows(6 * q, 6));
+    const double bending_weight = std::sqrt(bending);
+    weighted_strain_rows(w6, frame, um, bending_weight * um, g.middleRows(6 * q, 6));
     // Geometric blocks.
     const V3 a1 = frame.a1, a2 = frame.a2, n = frame.a3;
     const double j = frame.j;
@@ -362,8 +594,8 @@ void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen:
     block(0, 2, q) = block(2, 0, q).transpose();
     block(1, 2, q) = block(2, 1, q).transpose();
     if (channels == 4) {  // -pressure w N_A (N,u_B E1 + N,v_B E2), symmetrized
-      block(3, 0, q) = -0.5 * pressure * ref[34] * e1;
-      block(3, 1, q) = -0.5 * pressure * ref[34] * e2;
+      block(3, 0, q) = -0.5 * pressure * ref[25] * e1;
+      block(3, 1, q) = -0.5 * pressure * ref[25] * e2;
       block(0, 3, q) = block(3, 0, q).transpose();
       block(1, 3, q) = block(3, 1, q).transpose();
     }

@@ -10,11 +10,14 @@
 
 namespace softshell::engine::internal::nonlinear_kernel {
 
+// The per-point arrays of an element's P points are stored by quantity: entry k of point q at
+// k P + q (so that consecutive points' values are one vector load).
 // Per quadrature point, reference data (kRef doubles):
-//   0 A1, 3 A2, 6 A11, 9 A12, 12 A22 (tangents and second derivatives), 15 A1 x A2, 18 J = |A1 x A2|,
-//   19 N (unit normal), 22 membrane matrix dA t C, 28 bending matrix dA t^3/12 C (symmetric, packed
-//   00 11 22 01 02 12), 34 parameter weight (the Gauss weight times the cell area).
-constexpr int kRef = 35;
+//   0 A1, 3 A2, 6 A11, 9 A12, 12 A22 (tangents and second derivatives), 15 N (unit normal),
+//   18 J = |A1 x A2|, 19 membrane matrix dA t C (symmetric, packed 00 11 22 01 02 12), 25 parameter
+//   weight (the Gauss weight times the cell area). The bending matrix is dA t^3/12 C: the membrane
+//   matrix times `bending` = t^2 / 12, a parameter of the kernels.
+constexpr int kRef = 26;
 // Per quadrature point, deformed state (kState doubles):
 //   0 a1, 3 a2, 6 a11, 9 a12, 12 a22, 15 n, 18 j, 19 membrane forces N (n11 n22 n12),
 //   22 bending moments M (m11 m22 m12), 25 H = sum m_ab a_ab, 28 g = (I - n n^T) H / j.
@@ -47,20 +50,21 @@ struct PieceView {
 
 /// Internal forces (and the pressure force per unit pressure) of one element from its local
 /// displacements u (m x 3, column-major), with the per-point reference and state arrays of its
-/// points (the state is written). Scratch arrays values, coef of 18P. Returns false at a
-/// degenerate point.
+/// points (the state is written, unless `state` is null). Scratch arrays values, coef of 18P.
+/// Returns false at a degenerate point.
 bool element_forces(const PieceView* pieces, size_t count, Eigen::Index p, Eigen::Index m,
-                    const double* u, const double* reference, double* state, bool pressure, double* values,
-                    double* coef, double* force, double* pressure_force, double& energy, double& gradient);
+                    const double* u, const double* reference, double bending, double* state, bool pressure,
+                    double* values, double* coef, double* force, double* pressure_force, double& energy,
+                    double& gradient);
 
 /// out (m x 3) += the element's tangent product for local values v (m x 3).
 void element_tangent(const PieceView* pieces, size_t count, Eigen::Index p, Eigen::Index m,
-                     const double* v, const double* reference, const double* state, double pressure, double* values,
-                     double* coef, double* out);
+                     const double* v, const double* reference, double bending, const double* state, double pressure,
+                     double* values, double* coef, double* out);
 
 /// The element's tangent matrix (3m x 3m) from its full basis (6P x m, row d P + q).
 void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen::Index m, const double* reference,
-                            const double* state, double pressure, Eigen::MatrixXd& ke);
+                            double bending, const double* state, double pressure, Eigen::MatrixXd& ke);
 
 /// The unit cell's bicubic Bernstein basis and its derivatives at the n x n Gauss points (row
 /// d n^2 + j n + i, column a + 4 b for B_a(u) B_b(v)).

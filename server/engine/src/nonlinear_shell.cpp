@@ -125,21 +125,20 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, const std::vecto
         fail(ErrorCode::kUnprocessable, "nonlinear shell: the limit surface of face " + std::to_string(cell.face) +
                                             " is degenerate at a quadrature point");
       }
-      double* ref = rule.reference.data() + kRef * (e.first_point + static_cast<size_t>(q));
+      double ref[kRef];
       for (int d = 1; d < kRows; ++d) store3(ref + 3 * (d - 1), deriv.row(d * p + q).transpose());
       const V3 t3 = load3(ref).cross(load3(ref + 3));
-      store3(ref + 15, t3);
+      store3(ref + 15, t3 / t3.norm());
       ref[18] = t3.norm();
-      store3(ref + 19, t3 / t3.norm());
       const double weight = cell.weights[static_cast<size_t>(q)];
       const double da = weight * frame.j;
       const Eigen::Matrix3d& c = frame.material;
       const double packed[6] = {c(0, 0), c(1, 1), c(2, 2), c(0, 1), c(0, 2), c(1, 2)};
-      for (int i = 0; i < 6; ++i) {
-        ref[22 + i] = da * t * packed[i];
-        ref[28 + i] = da * t * t * t / 12.0 * packed[i];
-      }
-      ref[34] = weight;
+      for (int i = 0; i < 6; ++i) ref[19 + i] = da * t * packed[i];
+      ref[25] = weight;
+      // Stored by quantity (nonlinear_element.h).
+      double* stored = rule.reference.data() + kRef * e.first_point;
+      for (int i = 0; i < kRef; ++i) stored[i * p + q] = ref[i];
     }
     // Pieces: each run of g^2 points that is a square cell of a g-point Gauss rule (points at
     // u0 + s x_i, v0 + s x_j) and on which the basis is a bicubic polynomial to round-off keeps 16
@@ -156,15 +155,15 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, const std::vecto
     };
     // The edge length of the square cell of g-point Gauss points starting at `first` (0: not one).
     auto square_cell = [&](Eigen::Index first, int g) {
-      const std::vector<double>& x = gp[static_cast<size_t>(g)];
+      const std::vector<double>& nodes = gp[static_cast<size_t>(g)];
       const auto& start = cell.uvs[static_cast<size_t>(first)];
-      const double size = (cell.uvs[static_cast<size_t>(first) + 1][0] - start[0]) / (x[1] - x[0]);
+      const double size = (cell.uvs[static_cast<size_t>(first) + 1][0] - start[0]) / (nodes[1] - nodes[0]);
       if (!(size > 0.0)) return 0.0;
-      const double u0 = start[0] - size * x[0], v0 = start[1] - size * x[0];
+      const double u0 = start[0] - size * nodes[0], v0 = start[1] - size * nodes[0];
       for (Eigen::Index q = 0; q < static_cast<Eigen::Index>(g) * g; ++q) {
         const auto& uv = cell.uvs[static_cast<size_t>(first + q)];
-        if (std::abs(uv[0] - (u0 + size * x[static_cast<size_t>(q % g)])) > 1e-12 ||
-            std::abs(uv[1] - (v0 + size * x[static_cast<size_t>(q / g)])) > 1e-12) {
+        if (std::abs(uv[0] - (u0 + size * nodes[static_cast<size_t>(q % g)])) > 1e-12 ||
+            std::abs(uv[1] - (v0 + size * nodes[static_cast<size_t>(q / g)])) > 1e-12) {
           return 0.0;
         }
       }
@@ -312,16 +311,21 @@ size_t NonlinearShell::count_bytes() const {
   return bytes;
 }
 
-bool NonlinearShell::evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const {
-  return evaluate_rule(fine_, u, state, with_pressure);
+bool NonlinearShell::evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_pressure,
+                              bool with_points) const {
+  return evaluate_rule(fine_, u, state, with_pressure, with_points);
 }
 
 bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, ShellState& state,
-                                   bool with_pressure) const {
+                                   bool with_pressure, bool with_points) const {
   const int32_t ndof = num_dofs();
   if (u.size() != ndof) fail(ErrorCode::kInvalidArgument, "nonlinear shell: the displacement must have 3n entries");
   state.displacement = u;
-  state.points.resize(kState * rule.points);
+  if (with_points) {
+    state.points.resize(kState * rule.points);
+  } else {
+    state.points.clear();  // (keeps its capacity for the next evaluation with them)
+  }
   const size_t ne = rule.elements.size();
   std::vector<Eigen::MatrixX3d> element_force(ne), element_pressure(with_pressure ? ne : 0);
   std::vector<double> element_energy(ne, 0.0), element_gradient(ne, 0.0);
@@ -337,8 +341,9 @@ bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, S
     if (with_pressure) element_pressure[ei].setZero(m, 3);
     double energy = 0.0, gradient = 0.0;
     element_ok[ei] = element_forces(scratch.pieces.data(), scratch.pieces.size(), p, m,
-                                    local.data(), rule.reference.data() + kRef * e.first_point,
-                                    state.points.data() + kState * e.first_point, with_pressure, scratch.values.data(),
+                                    local.data(), rule.reference.data() + kRef * e.first_point, bending(),
+                                    with_points ? state.points.data() + kState * e.first_point : nullptr,
+                                    with_pressure, scratch.values.data(),
                                     scratch.coef.data(), element_force[ei].data(),
                                     with_pressure ? element_pressure[ei].data() : nullptr, energy, gradient);
     element_energy[ei] = energy;
@@ -402,8 +407,8 @@ void NonlinearShell::tangent_product_rule(const Rule& rule, const ShellState& st
     for (Eigen::Index col = 0; col < cols; ++col) {
       for (Eigen::Index a = 0; a < m; ++a) local.row(a) = v.block<3, 1>(3 * e.indices[static_cast<size_t>(a)], col).transpose();
       element_tangent(scratch.pieces.data(), scratch.pieces.size(), p, m, local.data(),
-                      rule.reference.data() + kRef * e.first_point, state.points.data() + kState * e.first_point,
-                      pressure, scratch.values.data(), scratch.coef.data(), result.data() + 3 * col * m);
+                      rule.reference.data() + kRef * e.first_point, bending(),
+                      state.points.data() + kState * e.first_point, pressure, scratch.values.data(), scratch.coef.data(), result.data() + 3 * col * m);
     }
   });
   out.setZero(ndof, cols);
@@ -461,8 +466,8 @@ void NonlinearShell::assemble_rule(const Rule& rule, const ShellState& state, do
   for_each_element(rule, [&](size_t ei) {
     const Element& e = rule.elements[ei];
     element_tangent_matrix(element_basis(rule, e), e.points, static_cast<Eigen::Index>(e.indices.size()),
-                           rule.reference.data() + kRef * e.first_point, state.points.data() + kState * e.first_point,
-                           pressure, element_k[ei]);
+                           rule.reference.data() + kRef * e.first_point, bending(),
+                           state.points.data() + kState * e.first_point, pressure, element_k[ei]);
   });
   for (size_t ei = 0; ei < rule.elements.size(); ++ei) {
     const Element& e = rule.elements[ei];

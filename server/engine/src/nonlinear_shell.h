@@ -42,7 +42,9 @@ struct ShellState {
   /// Largest displacement gradient |u,a| / |A_a| over the points: the internal forces are
   /// accurate to about eps E t h times it (round-off of strains that cancel in a rotation).
   double max_gradient = 0.0;
-  std::vector<double> points;      ///< per quadrature point, kPointState doubles (see .cpp)
+  /// Per quadrature point, kState doubles (nonlinear_element.h); empty unless evaluated with them.
+  std::vector<double> points;
+  bool has_points() const { return !points.empty(); }
 };
 
 class NonlinearShell {
@@ -67,8 +69,9 @@ class NonlinearShell {
   void set_threads(int threads) { threads_ = threads; }
 
   /// Evaluates the state at displacement `u` (3n). `with_pressure`: also the follower pressure
-  /// force. Returns state.valid.
-  bool evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const;
+  /// force. `with_points`: also the per-point frames and stress resultants that tangents need
+  /// (`has_points`); without them a pass writes a third of the bytes. Returns state.valid.
+  bool evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_pressure, bool with_points = true) const;
 
   /// out = (K_T(u) - pressure K_p(u)) v for the columns of v (3n x k): the derivative of
   /// f_int - pressure * f_p at the state (K_p: the load stiffness of the follower pressure).
@@ -142,7 +145,8 @@ class NonlinearShell {
   static Eigen::MatrixXd element_basis(const Rule& rule, const Element& e);  // 6P x m
   template <class Fn>
   void for_each_element(const Rule& rule, Fn&& fn) const;
-  bool evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const;
+  bool evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, ShellState& state, bool with_pressure,
+                     bool with_points = true) const;
   void tangent_product_rule(const Rule& rule, const ShellState& state, double pressure, const Eigen::MatrixXd& v,
                             Eigen::MatrixXd& out) const;
   void assemble_rule(const Rule& rule, const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
@@ -153,6 +157,11 @@ class NonlinearShell {
   // the approximate model adds back (empty: no coarse rule).
   Eigen::SparseMatrix<double> coarse_error_;
   int workers(int requested) const;  // threads to use for `requested` (0 = all)
+  // The bending matrix over the membrane one, t^2 / 12 (nonlinear_element.h).
+  double bending() const {
+    const double t = model_->material().thickness;
+    return t * t / 12.0;
+  }
   size_t count_bytes() const;
   size_t bytes_ = 0;  // memory_bytes(), counted when built
 

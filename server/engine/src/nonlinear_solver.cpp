@@ -97,10 +97,12 @@ class Run {
   std::shared_ptr<const NonlinearMemory> memory_out() const { return memory_out_; }
 
  private:
-  bool evaluate(const Eigen::VectorXd& u, ShellState& state) {
+  // The approximate directions read no per-point data of the model's rule: their passes skip it.
+  bool evaluate(const Eigen::VectorXd& u, ShellState& state) { return evaluate(u, state, !approximate_); }
+  bool evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_points) {
     ++stats_.evaluations;
     const auto t0 = Clock::now();
-    const bool ok = shell_.evaluate(u, state, pressure_ != 0.0);
+    const bool ok = shell_.evaluate(u, state, pressure_ != 0.0, with_points);
     stats_.evaluate_ms += ms_between(t0, Clock::now());
     return ok;
   }
@@ -117,6 +119,14 @@ class Run {
     if (pressure_ != 0.0) applied += lambda * pressure_ * s.pressure_force;
     if (lambda < 1.0) applied += (1.0 - lambda) * r0_;
     return std::max({applied.norm(), s.internal_force.norm(), force_floor_ * s.max_gradient, 1e-300});
+  }
+  // The per-point data of exact tangents at the current state (evaluated again if it was left out).
+  void ensure_points() {
+    if (state_.has_points()) return;
+    const Eigen::VectorXd u = state_.displacement;
+    if (!evaluate(u, state_, true)) {
+      fail(ErrorCode::kInternal, "the nonlinear solve could not evaluate a state it had evaluated before");
+    }
   }
   Eigen::VectorXd row_residual(const Eigen::VectorXd& u, double lambda) const;
   bool rows_met(const Eigen::VectorXd& g, const Eigen::VectorXd& u) const;
@@ -283,6 +293,7 @@ Eigen::VectorXd Run::tangent_times(const Eigen::VectorXd& v, double lambda) cons
 // the region has shrunk to nothing.
 bool Run::trust_region_step(const Eigen::VectorXd& r, double lambda) {
   constexpr double kEta = 0.1;  // CG to a tenth of the force: far from an answer the region limits the step
+  if (!approximate_) ensure_points();
   refresh_if_slow();
   const KktOperator& norm = *kkt_;
   const Eigen::VectorXd zero_rows = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(problem_.rows.size()));
@@ -405,6 +416,7 @@ void Run::refresh_tangent() {
   if (shell_.has_jacobian_rule() && coarse_is_current()) {
     shell_.assemble_approximate_tangent(coarse_, pressure_, *matrix);  // the coarse state is at hand
   } else if (!shell_.assemble_jacobian(state_, pressure_, *matrix)) {
+    ensure_points();
     shell_.assemble_tangent(state_, pressure_, *matrix);
   }
   std::shared_ptr<const Factorization> factor;
@@ -454,7 +466,11 @@ bool Run::newton_direction(const Eigen::VectorXd& r, const Eigen::VectorXd& g, d
   if (approximate_ && !coarse_is_current()) {
     if (!shell_.evaluate_coarse(state_.displacement, coarse_)) approximate_ = false;
   }
-  if (approximate_) ++stats_.approximate_iterations;
+  if (approximate_) {
+    ++stats_.approximate_iterations;
+  } else {
+    ensure_points();
+  }
   for (int attempt = 0; attempt < 2; ++attempt) {
     refresh_if_slow();
     const Eigen::VectorXd pc = g.isZero(0.0) ? Eigen::VectorXd::Zero(r.size())
