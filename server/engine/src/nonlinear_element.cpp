@@ -534,6 +534,65 @@ SOFTSHELL_HOT void element_tangent(const PieceView* pieces, size_t count, Eigen:
   }
 }
 
+namespace {
+
+// C += A^T B by 4 x 4 and 8 x 4 tiles kept in registers: A (K x ma) and B (K x nb) stored by row
+// (row k at a + k lda, at b + k ldb), ma and nb multiples of 4, C column-major (leading dimension
+// ldc). `lower` (A and B the same): only the tiles on or below the diagonal.
+[[gnu::always_inline]] inline void add_at_b(const double* __restrict a, Eigen::Index lda, const double* __restrict b,
+                                            Eigen::Index ldb, Eigen::Index k_rows, Eigen::Index ma, Eigen::Index nb,
+                                            double* __restrict c, Eigen::Index ldc, bool lower) {
+  for (Eigen::Index col = 0; col < nb; col += 4) {
+    Eigen::Index row = lower ? col : 0;
+    for (; row + 8 <= ma; row += 8) {
+      Lanes top[4] = {}, bottom[4] = {};
+      for (Eigen::Index k = 0; k < k_rows; ++k) {
+        const Lanes a0 = load<Lanes>(a + k * lda + row), a1 = load<Lanes>(a + k * lda + row + 4);
+        const double* bk = b + k * ldb + col;
+        _Pragma("GCC unroll 4")
+        for (int j = 0; j < 4; ++j) {
+          top[j] += a0 * bk[j];
+          bottom[j] += a1 * bk[j];
+        }
+      }
+      _Pragma("GCC unroll 4")
+      for (int j = 0; j < 4; ++j) {
+        double* cj = c + (col + j) * ldc + row;
+        store(cj, load<Lanes>(cj) + top[j]);
+        store(cj + 4, load<Lanes>(cj + 4) + bottom[j]);
+      }
+    }
+    for (; row < ma; row += 4) {
+      Lanes acc[4] = {};
+      for (Eigen::Index k = 0; k < k_rows; ++k) {
+        const Lanes a0 = load<Lanes>(a + k * lda + row);
+        const double* bk = b + k * ldb + col;
+        _Pragma("GCC unroll 4")
+        for (int j = 0; j < 4; ++j) acc[j] += a0 * bk[j];
+      }
+      _Pragma("GCC unroll 4")
+      for (int j = 0; j < 4; ++j) {
+        double* cj = c + (col + j) * ldc + row;
+        store(cj, load<Lanes>(cj) + acc[j]);
+      }
+    }
+  }
+}
+
+Eigen::Index round_up4(Eigen::Index n) { return (n + 3) / 4 * 4; }
+
+// A thread's scratch arrays for element tangent matrices, kept between elements.
+struct TangentScratch {
+  std::vector<double> strain_rows;  // 6P x round_up4(3m), by row
+  std::vector<double> material;     // round_up4(3m)^2, column-major
+  std::vector<double> channels;     // channels P x round_up4(m), by row
+  std::vector<double> weighted;     // the same, the channels weighted by one geometric entry
+  std::vector<double> pair;         // round_up4(m)^2, column-major
+  std::vector<Eigen::Matrix3d> blocks;
+};
+
+}  // namespace
+
 // One element's tangent (3m x 3m, DOF 3A + i) at a state: the second derivative of the energy
 // (minus `pressure` times the symmetric part of the pressure's load stiffness).
 //  - material part: B^T D B with B the strain rows at the deformed frame (kirchhoff_love.h), as
@@ -546,16 +605,26 @@ SOFTSHELL_HOT void element_tangent(const PieceView* pieces, size_t count, Eigen:
 //      (mN,u) = -P E1 / j, (mN,v) = -P E2 / j;
 //    with E1 = -[a2]x, E2 = [a1]x (the change of a1 x a2 per unit change of a1, a2), e1n = E1^T n,
 //    e1g = E1^T g and so on, P = I - n n^T.
-void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen::Index m, const double* reference,
-                            double bending, const double* state, double pressure, Eigen::MatrixXd& ke) {
-  Eigen::MatrixXd g(6 * p, 3 * m), w6(6, m);
-  SurfaceFrame frame;
+// The products over the points run in register tiles (add_at_b); the rest is per point.
+SOFTSHELL_HOT void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen::Index m,
+                                          const double* reference, double bending, const double* state,
+                                          double pressure, Eigen::MatrixXd& ke) {
+  thread_local TangentScratch scratch;
   const int channels = pressure != 0.0 ? 4 : 3;
-  Eigen::MatrixXd mn(p, m);                           // the mN channel
-  std::vector<Eigen::Matrix3d> blocks(static_cast<size_t>(channels * channels * p), Eigen::Matrix3d::Zero());
+  const Eigen::Index dofs = 3 * m, wide = round_up4(dofs), mp = round_up4(m);
+  std::vector<double>& rows = scratch.strain_rows;
+  rows.assign(static_cast<size_t>(6 * p * wide), 0.0);
+  scratch.channels.assign(static_cast<size_t>(channels * p * mp), 0.0);
+  double* ch = scratch.channels.data();
+  std::vector<Eigen::Matrix3d>& blocks = scratch.blocks;
+  blocks.resize(static_cast<size_t>(channels * channels * p));
   auto block = [&](int c, int d, Eigen::Index q) -> Eigen::Matrix3d& {
     return blocks[static_cast<size_t>((c * channels + d) * p + q)];
   };
+  Eigen::MatrixXd point_rows(6, dofs);
+  Eigen::MatrixXd w6(6, m);
+  SurfaceFrame frame;
+  const double bending_weight = std::sqrt(bending);
   double ref[kRef], st[kState];  // the point's entries (stored by quantity)
   for (Eigen::Index q = 0; q < p; ++q) {
     for (int k = 0; k < kRef; ++k) ref[k] = reference[k * p + q];
@@ -572,8 +641,11 @@ void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen:
     dm << ref[19], ref[22], ref[23], ref[22], ref[20], ref[24], ref[23], ref[24], ref[21];
     const Eigen::LLT<Eigen::Matrix3d> factor(dm);
     const Eigen::Matrix3d um = factor.matrixU();
-    const double bending_weight = std::sqrt(bending);
-    weighted_strain_rows(w6, frame, um, bending_weight * um, g.middleRows(6 * q, 6));
+    weighted_strain_rows(w6, frame, um, bending_weight * um, point_rows);
+    for (int r = 0; r < 6; ++r) {
+      double* out = rows.data() + (6 * q + r) * wide;
+      for (Eigen::Index col = 0; col < dofs; ++col) out[col] = point_rows(r, col);
+    }
     // Geometric blocks.
     const V3 a1 = frame.a1, a2 = frame.a2, n = frame.a3;
     const double j = frame.j;
@@ -599,34 +671,44 @@ void element_tangent_matrix(const Eigen::MatrixXd& basis, Eigen::Index p, Eigen:
       block(0, 3, q) = block(3, 0, q).transpose();
       block(1, 3, q) = block(3, 1, q).transpose();
     }
-    mn.row(q) = mm[0] * basis.row(3 * p + q) + mm[1] * basis.row(5 * p + q) + 2.0 * mm[2] * basis.row(4 * p + q);
+    // Channel values: N,u, N,v, mN (, N).
+    for (Eigen::Index a = 0; a < m; ++a) {
+      ch[q * mp + a] = basis(p + q, a);
+      ch[(p + q) * mp + a] = basis(2 * p + q, a);
+      ch[(2 * p + q) * mp + a] = mm[0] * basis(3 * p + q, a) + mm[1] * basis(5 * p + q, a) + 2.0 * mm[2] * basis(4 * p + q, a);
+      if (channels == 4) ch[(3 * p + q) * mp + a] = basis(q, a);
+    }
   }
-  ke.setZero(3 * m, 3 * m);
-  ke.selfadjointView<Eigen::Lower>().rankUpdate(g.transpose());
-  ke.triangularView<Eigen::StrictlyUpper>() = ke.transpose();
-  // Channel values per point: N,u, N,v, mN (, N).
-  Eigen::MatrixXd ch(channels * p, m);
-  ch.middleRows(0, p) = basis.middleRows(p, p);
-  ch.middleRows(p, p) = basis.middleRows(2 * p, p);
-  ch.middleRows(2 * p, p) = mn;
-  if (channels == 4) ch.middleRows(3 * p, p) = basis.topRows(p);
-  Eigen::MatrixXd z(channels * p, m), kij(m, m);
-  Eigen::VectorXd coef(p);
+  // Material part: the lower tiles of rows^T rows.
+  scratch.material.assign(static_cast<size_t>(wide * wide), 0.0);
+  add_at_b(rows.data(), wide, rows.data(), wide, 6 * p, wide, wide, scratch.material.data(), wide, true);
+  ke.resize(dofs, dofs);
+  for (Eigen::Index col = 0; col < dofs; ++col) {
+    for (Eigen::Index row = col; row < dofs; ++row) ke(row, col) = ke(col, row) = scratch.material[col * wide + row];
+  }
+  // Geometric part, per pair of axes (i, jj): ch^T Z with Z = sum_d diag(G_cd(i, jj)) ch_d.
+  std::vector<double>& z = scratch.weighted;
   for (int i = 0; i < 3; ++i) {
     for (int jj = i; jj < 3; ++jj) {
-      z.setZero();
+      z.assign(scratch.channels.size(), 0.0);
       for (int c = 0; c < channels; ++c) {
         for (int d = 0; d < channels; ++d) {
           if ((c >= 2 && d >= 2) || (c == 3 && d == 2) || (c == 2 && d == 3)) continue;  // zero blocks
-          for (Eigen::Index q = 0; q < p; ++q) coef[q] = block(c, d, q)(i, jj);
-          z.middleRows(c * p, p).noalias() += coef.asDiagonal() * ch.middleRows(d * p, p);
+          for (Eigen::Index q = 0; q < p; ++q) {
+            const double coef = block(c, d, q)(i, jj);
+            double* out = z.data() + (c * p + q) * mp;
+            const double* in = ch + (d * p + q) * mp;
+            for (Eigen::Index a = 0; a < mp; ++a) out[a] += coef * in[a];
+          }
         }
       }
-      kij.noalias() = ch.transpose() * z;
+      scratch.pair.assign(static_cast<size_t>(mp * mp), 0.0);
+      add_at_b(ch, mp, z.data(), mp, channels * p, mp, mp, scratch.pair.data(), mp, false);
+      const double* kij = scratch.pair.data();  // (a, b) at b mp + a
       for (Eigen::Index b = 0; b < m; ++b) {
         for (Eigen::Index a = 0; a < m; ++a) {
-          ke(3 * a + i, 3 * b + jj) += kij(a, b);
-          if (jj != i) ke(3 * b + jj, 3 * a + i) += kij(a, b);
+          ke(3 * a + i, 3 * b + jj) += kij[b * mp + a];
+          if (jj != i) ke(3 * b + jj, 3 * a + i) += kij[b * mp + a];
         }
       }
     }

@@ -296,7 +296,29 @@ Eigen::MatrixXd NonlinearShell::element_basis(const Rule& rule, const Element& e
   return basis;
 }
 
-size_t NonlinearShell::memory_bytes() const { return bytes_; }
+size_t NonlinearShell::memory_bytes() const {
+  std::lock_guard lock(workspace_mutex_);
+  size_t bytes = bytes_;
+  for (const auto& w : workspaces_) bytes += w->capacity() * sizeof(double);
+  return bytes;
+}
+
+NonlinearShell::Workspace NonlinearShell::take_workspace(size_t size) const {
+  std::unique_ptr<std::vector<double>> w;
+  {
+    std::lock_guard lock(workspace_mutex_);
+    if (!workspaces_.empty()) {
+      w = std::move(workspaces_.back());
+      workspaces_.pop_back();
+    }
+  }
+  if (!w) w = std::make_unique<std::vector<double>>();
+  w->resize(size);
+  return Workspace(w.release(), [this](std::vector<double>* done) {
+    std::lock_guard lock(workspace_mutex_);
+    workspaces_.emplace_back(done);
+  });
+}
 
 size_t NonlinearShell::count_bytes() const {
   size_t bytes = sizeof(*this);
@@ -462,17 +484,27 @@ void NonlinearShell::assemble_rule(const Rule& rule, const ShellState& state, do
   const Eigen::SparseMatrix<double>& k = model_->stiffness();
   out = k;  // the pattern; values overwritten below
   std::fill(out.valuePtr(), out.valuePtr() + out.nonZeros(), 0.0);
-  std::vector<Eigen::MatrixXd> element_k(rule.elements.size());
+  // The element matrices, side by side in a workspace kept for the next assembly (fresh pages for
+  // them cost more than computing them, on virtual machines).
+  std::vector<size_t> at(rule.elements.size() + 1, 0);
+  for (size_t ei = 0; ei < rule.elements.size(); ++ei) {
+    const auto dofs = 3 * rule.elements[ei].indices.size();
+    at[ei + 1] = at[ei] + dofs * dofs;
+  }
+  Workspace workspace = take_workspace(at.back());
+  double* element_k = workspace->data();
   for_each_element(rule, [&](size_t ei) {
     const Element& e = rule.elements[ei];
-    element_tangent_matrix(element_basis(rule, e), e.points, static_cast<Eigen::Index>(e.indices.size()),
-                           rule.reference.data() + kRef * e.first_point, bending(),
-                           state.points.data() + kState * e.first_point, pressure, element_k[ei]);
+    const auto m = static_cast<Eigen::Index>(e.indices.size());
+    thread_local Eigen::MatrixXd ke;
+    element_tangent_matrix(element_basis(rule, e), e.points, m, rule.reference.data() + kRef * e.first_point,
+                           bending(), state.points.data() + kState * e.first_point, pressure, ke);
+    std::copy(ke.data(), ke.data() + ke.size(), element_k + at[ei]);
   });
   for (size_t ei = 0; ei < rule.elements.size(); ++ei) {
     const Element& e = rule.elements[ei];
     const auto m = static_cast<Eigen::Index>(e.indices.size());
-    const Eigen::MatrixXd& ke = element_k[ei];
+    const Eigen::Map<const Eigen::MatrixXd> ke(element_k + at[ei], 3 * m, 3 * m);
     for (Eigen::Index bl = 0; bl < m; ++bl) {
       for (int j = 0; j < 3; ++j) {
         double* column = out.valuePtr() + out.outerIndexPtr()[3 * e.indices[static_cast<size_t>(bl)] + j];

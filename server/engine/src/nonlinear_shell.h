@@ -18,6 +18,8 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
+#include <mutex>
 #include <memory>
 #include <vector>
 
@@ -167,6 +169,12 @@ class NonlinearShell {
 
   std::shared_ptr<Executor> executor_;
   int threads_ = 0;
+
+  // Workspaces of assemblies, returned to the pool when done (one per concurrent assembly).
+  using Workspace = std::unique_ptr<std::vector<double>, std::function<void(std::vector<double>*)>>;
+  Workspace take_workspace(size_t size) const;
+  mutable std::mutex workspace_mutex_;
+  mutable std::vector<std::unique_ptr<std::vector<double>>> workspaces_;
 };
 
 }  // namespace softshell::engine::internal
