@@ -211,6 +211,32 @@ TEST(CholeskyFactor, ReusesTheAnalysisForAnotherMatrixOfThePattern) {
   EXPECT_LT(relative_error(first->backward(first->forward(b)), Eigen::LLT<Eigen::MatrixXd>(dense).solve(b)), 1e-11);
 }
 
+// Large matrices are ordered differently (CHOLMOD: nested dissection beside AMD, from 6,000 rows):
+// both sides of that size stay exact, in either order on one thread (whose settings the last
+// factorization left), and an indefinite large matrix is still refused.
+TEST(CholeskyFactor, LargeAndSmallMatricesAreBothExact) {
+  Eigen::Matrix3d block;
+  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const Sparse large = with_blocks(grid_laplacian(48, 48, 0.05), block);  // 6,912 rows
+  const Sparse small = with_blocks(grid_laplacian(10, 8, 0.2), block);
+  ASSERT_GE(large.rows(), 6000);
+  for (const Sparse* a : {&small, &large, &small}) {
+    SCOPED_TRACE(a->rows());
+    const auto f = factor_of(*a);
+    ASSERT_TRUE(f);
+    const Eigen::MatrixXd b = random_rhs(a->rows(), 2, 5);
+    const Eigen::SimplicialLLT<Sparse> reference(*a);
+    ASSERT_EQ(reference.info(), Eigen::Success);
+    EXPECT_LT(relative_error(f->backward(f->forward(b)), reference.solve(b)), 1e-11);
+  }
+  Sparse indefinite = large;
+  indefinite.coeffRef(4000, 4000) = -1.0;
+  CholeskyFactor::Failure failure;
+  EXPECT_FALSE(CholeskyFactor::factorize(upper_of(indefinite), nullptr, failure));
+  EXPECT_GE(failure.column, 0);
+  EXPECT_LT(failure.column, indefinite.rows());
+}
+
 // Expects factorize() to refuse `a`, name a column in range and say whether A held non-finite
 // values.
 void expect_refused(const Sparse& a, const char* what, bool not_finite = false, Eigen::Index expected_column = -1) {

@@ -18,16 +18,34 @@
 namespace softshell::engine::internal {
 namespace {
 
+// CHOLMOD's settings for a factorization of `rows` rows (all of them: a thread's common keeps
+// what the last call set). The fill-reducing ordering is CHOLMOD's default (AMD, and METIS too
+// when AMD's factor comes out dense) unless the matrix is large: there CHOLMOD's nested
+// dissection (METIS on the separators, CAMD on the parts) factors fastest and pays for its
+// slower analysis at once. Measured (docs/benchmarks.md, "The ordering"): spot_quadrangulated's K
+// 127 ms a factorization against the default's 258 ms (METIS), roof 181x181 3.8 s against 4.6 s.
+// Below a few thousand DOFs the orderings factor alike and AMD's analysis is the cheapest.
+void configure(cholmod_common* c, size_t rows) {
+  cholmod_defaults(c);
+  c->print = 0;  // errors are reported through our own messages
+  c->error_handler = nullptr;
+  c->supernodal = CHOLMOD_AUTO;
+  c->final_ll = 1;  // keep L L^T: the solve is two triangular sweeps
+  constexpr size_t kNestedDissectionFrom = 6000;
+  if (rows >= kNestedDissectionFrom) {
+    c->nmethods = 2;  // CHOLMOD tries both and keeps the better
+    c->method[0].ordering = CHOLMOD_AMD;
+    c->method[1].ordering = CHOLMOD_NESDIS;
+  }
+}
+
 // CHOLMOD keeps its workspace and settings in a cholmod_common; one per thread lets many solves
 // run at once on a shared (read-only) factor.
 struct ThreadCommon {
   cholmod_common common;
   ThreadCommon() {
     cholmod_start(&common);
-    common.print = 0;        // errors are reported through our own messages
-    common.error_handler = nullptr;
-    common.supernodal = CHOLMOD_AUTO;
-    common.final_ll = 1;     // keep L L^T: the solve is two triangular sweeps
+    configure(&common, 0);
   }
   ~ThreadCommon() { cholmod_finish(&common); }
   ThreadCommon(const ThreadCommon&) = delete;
@@ -148,6 +166,7 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
     const auto turn = blas_turn();
     // A copy of a factor of the same pattern carries its ordering and supernodes: factorizing
     // into it skips the analysis.
+    configure(c, a.nrow);
     l = same_pattern ? cholmod_copy_factor(same_pattern->state_->l, c) : cholmod_analyze(&a, c);
     ok = l && cholmod_factorize(&a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
   }
