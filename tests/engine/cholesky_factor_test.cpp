@@ -212,8 +212,8 @@ TEST(CholeskyFactor, ReusesTheAnalysisForAnotherMatrixOfThePattern) {
 }
 
 // Large matrices are ordered differently (CHOLMOD: nested dissection beside AMD, from 6,000 rows):
-// both sides of that size stay exact, in either order on one thread (whose settings the last
-// factorization left), and an indefinite large matrix is still refused.
+// matrices on both sides of that size stay exact, in either order on one thread (whose settings
+// the last factorization left), and an indefinite large matrix is still refused.
 TEST(CholeskyFactor, LargeAndSmallMatricesAreBothExact) {
   Eigen::Matrix3d block;
   block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
