@@ -211,6 +211,22 @@ TEST(CholeskyFactor, ReusesTheAnalysisForAnotherMatrixOfThePattern) {
   EXPECT_LT(relative_error(first->backward(first->forward(b)), Eigen::LLT<Eigen::MatrixXd>(dense).solve(b)), 1e-11);
 }
 
+// Expects factorize() to refuse `a`, name a column in range and say whether A held non-finite
+// values.
+void expect_refused(const Sparse& a, const char* what, bool not_finite = false, Eigen::Index expected_column = -1) {
+  SCOPED_TRACE(what);
+  CholeskyFactor::Failure failure;
+  const auto f = CholeskyFactor::factorize(upper_of(a), nullptr, failure);
+  EXPECT_FALSE(f);
+  EXPECT_FALSE(failure.out_of_memory);
+  EXPECT_EQ(failure.not_finite, not_finite);
+  EXPECT_GE(failure.column, 0);
+  EXPECT_LT(failure.column, a.rows());
+  if (expected_column >= 0) {
+    EXPECT_EQ(failure.column, expected_column);
+  }
+}
+
 // Large matrices are ordered differently (CHOLMOD: nested dissection beside AMD, from 6,000 rows):
 // matrices on both sides of that size stay exact, in either order on one thread (whose settings
 // the last factorization left), and an indefinite large matrix is still refused.
@@ -231,26 +247,7 @@ TEST(CholeskyFactor, LargeAndSmallMatricesAreBothExact) {
   }
   Sparse indefinite = large;
   indefinite.coeffRef(4000, 4000) = -1.0;
-  CholeskyFactor::Failure failure;
-  EXPECT_FALSE(CholeskyFactor::factorize(upper_of(indefinite), nullptr, failure));
-  EXPECT_GE(failure.column, 0);
-  EXPECT_LT(failure.column, indefinite.rows());
-}
-
-// Expects factorize() to refuse `a`, name a column in range and say whether A held non-finite
-// values.
-void expect_refused(const Sparse& a, const char* what, bool not_finite = false, Eigen::Index expected_column = -1) {
-  SCOPED_TRACE(what);
-  CholeskyFactor::Failure failure;
-  const auto f = CholeskyFactor::factorize(upper_of(a), nullptr, failure);
-  EXPECT_FALSE(f);
-  EXPECT_FALSE(failure.out_of_memory);
-  EXPECT_EQ(failure.not_finite, not_finite);
-  EXPECT_GE(failure.column, 0);
-  EXPECT_LT(failure.column, a.rows());
-  if (expected_column >= 0) {
-    EXPECT_EQ(failure.column, expected_column);
-  }
+  expect_refused(indefinite, "large, one negative diagonal entry");
 }
 
 TEST(CholeskyFactor, ReportsMatricesThatAreNotPositiveDefinite) {
