@@ -81,7 +81,11 @@ std::string scientific(double x) {
 constexpr int kMaxStepIterations = 30;     // Newton iterations per load step before it is split
 constexpr int kMaxKrylov = 24;             // GMRES iterations per Newton step
 constexpr int kMaxTrustSteps = 100;        // trust-region steps per load step
-constexpr double kStepTolerance = 1e-5;    // convergence of intermediate load steps
+// Intermediate load steps only give the next one its start (the answer is converged to the
+// request's tolerance at the last step and checked there): 1% of the forces acting is close
+// enough for Newton's next step. Measured from rest on catmark_righthanded: 19 Newton iterations
+// instead of 24, 385-395 ms instead of 494-511 ms (1e-3: 22 iterations).
+constexpr double kStepTolerance = 1e-2;
 constexpr double kMinLoadStep = 1.0 / 1024.0;
 // The first load step turns the surface by about this much (radians) in the linear estimate:
 // Newton converges from there in a few iterations, and later steps have a secant predictor.
