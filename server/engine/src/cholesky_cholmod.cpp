@@ -33,9 +33,9 @@ void configure(cholmod_common* c, size_t rows) {
   c->final_ll = 1;  // keep L L^T: the solve is two triangular sweeps
   // Supernodes amalgamated twice as far as CHOLMOD's defaults (4/16/48 columns, 80/10/5% zeros):
   // a shell's matrix has 3 x 3 blocks and small separators, and on fewer, larger supernodes the
-  // BLAS calls pay off. Measured on 2 cores: catmark_righthanded's factor 12.3 -> 6.9 ms,
-  // catmark_pawn's 13.5 -> 7.0 ms, spot_quadrangulated's 71 -> 63 ms; 14% more stored entries,
-  // solves as fast. (Four times as far is slower again on spot: 180 ms.)
+  // BLAS calls pay off. Measured on 2 cores: catmark_righthanded's factor 12.3-12.9 -> 6.9-8.2 ms,
+  // spot_quadrangulated's 71-122 -> 63-91 ms, blub's unchanged; 10-18% more stored entries,
+  // solves as fast. (Four times as far is slower on spot: 169-197 ms; docs/benchmarks.md.)
   c->nrelax[0] = 8;
   c->nrelax[1] = 32;
   c->nrelax[2] = 96;
