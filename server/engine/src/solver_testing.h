@@ -15,4 +15,9 @@ extern std::atomic<FastPathCorruption> g_corrupt_fast_path;
 /// The same for every answer of the nonlinear solver, just before its final check.
 extern std::atomic<FastPathCorruption> g_corrupt_nonlinear_answer;
 
+/// When set, the nonlinear solver's exact directions take their tangent products as differences
+/// of the internal forces from the start of every load step (normally only after approximate
+/// directions ran slow), wherever the accuracy asked of GMRES allows them.
+extern std::atomic<bool> g_directions_by_difference;
+
 }  // namespace softshell::engine::internal

@@ -63,6 +63,9 @@ struct NonlinearOptions {
 struct NonlinearStats {
   int32_t iterations = 0;         ///< nonlinear iterations (directions computed), all load steps
   int32_t approximate_iterations = 0;  ///< of which with directions on the approximate tangent
+  /// of which exact directions with tangent products by differences of the internal forces
+  /// (after approximate ones, where an exact product would need a second pass over the points)
+  int32_t difference_iterations = 0;
   int32_t evaluations = 0;        ///< evaluations of the internal forces (iterations + line searches)
   int32_t load_steps = 0;         ///< 1 when the request converged in one step
   int32_t krylov_iterations = 0;  ///< GMRES iterations (each one tangent product and one solve)
