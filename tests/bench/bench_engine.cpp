@@ -29,6 +29,7 @@
 #include <random>
 
 #include "bench_support.h"
+#include "shell_benchmarks.h"
 #include "softshell/engine/nonlinear_solver.h"
 #include "softshell/engine/solver.h"
 #include "softshell/interaction.h"
@@ -64,24 +65,6 @@ int count_extraordinary_vertices(const ControlMesh& mesh) {
   return evs;
 }
 
-/// The lowest 5% of the control points (by y) of every connected component, at least four, all
-/// axes fixed. Per part, because a whole part can lie above another part's 5%; four, because a
-/// free part needs three held points and the tiny all-valence-3 parts (a cube's 8 control points)
-/// have zero-energy modes beyond the rigid ones that three points do not stop.
-std::vector<VertexConstraint> bottom_supports(const ControlMesh& mesh, const std::vector<int32_t>& component_of) {
-  std::map<int32_t, std::vector<int32_t>> parts;
-  for (size_t v = 0; v < component_of.size(); ++v) parts[component_of[v]].push_back(static_cast<int32_t>(v));
-  std::vector<VertexConstraint> supports;
-  for (auto& [part, points] : parts) {
-    std::stable_sort(points.begin(), points.end(), [&](int32_t a, int32_t b) {
-      return mesh.positions()[static_cast<size_t>(a)].y() < mesh.positions()[static_cast<size_t>(b)].y();
-    });
-    points.resize(std::min(points.size(), std::max<size_t>(4, points.size() / 20)));
-    for (int32_t v : points) supports.push_back({v, kAxisAll, Vec3::Zero()});
-  }
-  return supports;
-}
-
 struct Measurement {
   int dofs = 0;
   double precompute_ms = 0.0;
@@ -111,7 +94,7 @@ Measurement measure(ControlMesh mesh, int warm_solves, const LimitEvaluator::Opt
   result.stiffness_mib = static_cast<double>((*model)->memory_bytes()) / (1024.0 * 1024.0);
 
   DeformationRequest base;
-  base.vertex_constraints = bottom_supports(mesh, (*model)->component_of());
+  base.vertex_constraints = test::bottom_supports(mesh, (*model)->component_of());
   auto cache = std::make_shared<engine::FactorCache>();
   engine::Solver solver(*model, cache);
   t0 = bench::Clock::now();
@@ -190,17 +173,7 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   }
   result.points = static_cast<int>((*model)->quadrature().size());
   const LimitEvaluator& limit = (*model)->evaluator();
-  SurfacePoint grab{0, 0, 0.5, 0.5};
-  double top = -1e300;
-  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
-    const SurfacePoint p{f, 0, 0.5, 0.5};
-    if (!limit.check(p).ok()) continue;
-    const double y = limit.evaluate(p).position.y();
-    if (y > top) {
-      top = y;
-      grab = p;
-    }
-  }
+  const SurfacePoint grab = test::topmost_face_centre(limit);
   Vec3 low = mesh.positions()[0], high = low;
   for (const Vec3& p : mesh.positions()) {
     low = low.cwiseMin(p);
@@ -212,7 +185,7 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   options.approximate_directions = std::getenv("SOFTSHELL_BENCH_EXACT_DIRECTIONS") == nullptr;
   engine::NonlinearSolver solver(*model, cache, options);
   DeformationRequest request;
-  request.vertex_constraints = bottom_supports(mesh, (*model)->component_of());
+  request.vertex_constraints = test::bottom_supports(mesh, (*model)->component_of());
   request.limit_constraints.push_back({grab, Vec3::Zero(), {}, {}});
   auto t0 = bench::Clock::now();
   auto first = solver.solve(request);
@@ -307,7 +280,7 @@ void support_costs(ControlMesh mesh, int warm_solves, SupportCost& vertex, Suppo
   for (Vec3& p : mesh.positions()) p *= scale;
   auto model = engine::ShellModel::build(mesh, kMaterial).value();
   DeformationRequest on_vertices, on_floor;
-  on_vertices.vertex_constraints = bottom_supports(mesh, model->component_of());
+  on_vertices.vertex_constraints = test::bottom_supports(mesh, model->component_of());
   {
     const Tessellation surface = Tessellation::create(model->evaluator(), 3).value();
     double floor_y = std::numeric_limits<double>::infinity();

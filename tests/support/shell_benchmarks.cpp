@@ -1,5 +1,6 @@
 #include "shell_benchmarks.h"
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <random>
@@ -373,6 +374,35 @@ std::vector<LagrangeConstraint> turned_tangents(const LimitEvaluator& evaluator,
     rows.push_back(std::move(c));
   }
   return rows;
+}
+
+std::vector<VertexConstraint> bottom_supports(const ControlMesh& mesh, const std::vector<int32_t>& component_of) {
+  std::map<int32_t, std::vector<int32_t>> parts;
+  for (size_t v = 0; v < component_of.size(); ++v) parts[component_of[v]].push_back(static_cast<int32_t>(v));
+  std::vector<VertexConstraint> supports;
+  for (auto& [part, points] : parts) {
+    std::stable_sort(points.begin(), points.end(), [&](int32_t a, int32_t b) {
+      return mesh.positions()[static_cast<size_t>(a)].y() < mesh.positions()[static_cast<size_t>(b)].y();
+    });
+    points.resize(std::min(points.size(), std::max<size_t>(4, points.size() / 20)));
+    for (int32_t v : points) supports.push_back({v, kAxisAll, Vec3::Zero()});
+  }
+  return supports;
+}
+
+SurfacePoint topmost_face_centre(const LimitEvaluator& limit) {
+  SurfacePoint grab{0, 0, 0.5, 0.5};
+  double top = -1e300;
+  for (int32_t f = 0; f < limit.mesh().num_faces(); ++f) {
+    const SurfacePoint p{f, 0, 0.5, 0.5};
+    if (!limit.check(p).ok()) continue;
+    const double y = limit.evaluate(p).position.y();
+    if (y > top) {
+      top = y;
+      grab = p;
+    }
+  }
+  return grab;
 }
 
 }  // namespace softshell::test

@@ -201,4 +201,13 @@ inline Vec3 rigid_turn(const Eigen::Matrix3d& rotation, const Vec3& through, con
 std::vector<LagrangeConstraint> turned_tangents(const LimitEvaluator& evaluator, const std::vector<SurfacePoint>& points,
                                                 const Eigen::Matrix3d& rotation);
 
+/// The lowest 5% of the control points (by y) of every connected component, at least four, all
+/// axes fixed: the supports of bench_engine and of the tests on every shipped mesh. Per part,
+/// because a whole part can lie above another part's 5%; four, because a free part needs three
+/// held points and the tiny all-valence-3 parts (a cube's 8 control points) have zero-energy
+/// modes beyond the rigid ones that three points do not stop.
+std::vector<VertexConstraint> bottom_supports(const ControlMesh& mesh, const std::vector<int32_t>& component_of);
+/// The centre of the face whose centre lies highest (largest y), where a grab pulls.
+SurfacePoint topmost_face_centre(const LimitEvaluator& limit);
+
 }  // namespace softshell::test
