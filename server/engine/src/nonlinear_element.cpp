@@ -2,6 +2,7 @@
 #include "nonlinear_element.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <type_traits>
@@ -219,9 +220,10 @@ template <class T>
 // three axes 6P apart.
 
 // The Bernstein pieces' passes, the bulk of a pass over the points, with the sums kept in
-// registers: 16 coefficients x 3 axes are 12 Lanes. `basis` is the unit cell's bicubic basis of an
-// n-point cell (n = g^2), by coefficient (column k: rows r n + q) for the forward pass and by point
-// (row r n + q: the 16 values) for the transposed one.
+// registers: 16 coefficients x 3 axes are 12 Lanes. On 3 x 3 and 4 x 4 cells they go by sum
+// factorization (tensor_values, tensor_transpose); other cells use `basis`, the unit cell's
+// bicubic basis at the cell's n points, by coefficient (column k: rows r n + q) for the forward
+// pass and by point (row r n + q: the 16 values) for the transposed one.
 
 // Derivative row r's factor on a cell of edge `size` (the basis is of the unit cell).
 [[gnu::always_inline]] inline double row_scale(int r, double size) {
@@ -250,67 +252,137 @@ template <class T>
   }
 }
 
-// values rows first_row <= r < end_row at the piece's n points from its coefficients y.
-template <int N>
-[[gnu::always_inline]] inline void bernstein_values(const double* __restrict y, double size,
-                                                    const double* __restrict basis, Eigen::Index first,
-                                                    Eigen::Index p, int first_row, int end_row,
-                                                    double* __restrict values) {
-  constexpr int kChunks = N / kLanes, kTail = N % kLanes;
-  const Eigen::Index axes = kRows * p;
-  for (int r = first_row; r < end_row; ++r) {
-    const double scale = row_scale(r, size);
-    Lanes acc[3][kChunks] = {};
-    double tail[3][kTail > 0 ? kTail : 1] = {};
-    for (int k = 0; k < 16; ++k) {
-      const double* __restrict col = basis + k * (kRows * N) + r * N;
-      const double y0 = y[k], y1 = y[16 + k], y2 = y[32 + k];
-      _Pragma("GCC unroll 16")
-      for (int i = 0; i < kChunks; ++i) {
-        const Lanes b = load<Lanes>(col + kLanes * i);
-        acc[0][i] += b * y0;
-        acc[1][i] += b * y1;
-        acc[2][i] += b * y2;
-      }
-      _Pragma("GCC unroll 16")
-      for (int t = 0; t < kTail; ++t) {
-        tail[0][t] += col[kLanes * kChunks + t] * y0;
-        tail[1][t] += col[kLanes * kChunks + t] * y1;
-        tail[2][t] += col[kLanes * kChunks + t] * y2;
+// Sum factorization: the bicubic basis at a g x g tensor grid is a product of 1-D cubics, so the
+// sums over the 16 coefficients split into two sums of 4, one per direction: about 2.5 times
+// fewer products than by the 16 x g^2 table, an evaluation of catmark_righthanded's model 10-12%
+// faster, a tangent product 8-10%. Vectors run over the g points of a grid row (the fourth lane
+// is zero on a 3 x 3 cell).
+struct CubicTable {
+  // B_a^(order)(t_i) of the unit interval's g Gauss points: by point [order][a][i] and by
+  // coefficient [order][i][a], zero past g.
+  alignas(32) double over_points[3][4][4];
+  alignas(32) double over_coefficients[3][4][4];
+};
+// g = 3 or 4 (built once; thread-safe).
+const CubicTable& cubic_table(int g) {
+  static const std::array<CubicTable, 2> tables = [] {
+    std::array<CubicTable, 2> out{};
+    for (int points : {3, 4}) {
+      std::vector<double> gp, gw;
+      gauss_legendre_01(points, gp, gw);
+      CubicTable& t = out[static_cast<size_t>(points - 3)];
+      for (int i = 0; i < points; ++i) {
+        const double x = gp[static_cast<size_t>(i)], y = 1.0 - x;
+        const double b[3][4] = {{y * y * y, 3 * x * y * y, 3 * x * x * y, x * x * x},
+                                {-3 * y * y, 3 * y * y - 6 * x * y, 6 * x * y - 3 * x * x, 3 * x * x},
+                                {6 * y, 18 * x - 12, 6 - 18 * x, 6 * x}};
+        for (int order = 0; order < 3; ++order) {
+          for (int a = 0; a < 4; ++a) {
+            t.over_points[order][a][i] = b[order][a];
+            t.over_coefficients[order][i][a] = b[order][a];
+          }
+        }
       }
     }
-    double* __restrict out = values + r * p + first;
+    return out;
+  }();
+  return tables[static_cast<size_t>(g - 3)];
+}
+constexpr int kOrderU[kRows] = {0, 1, 0, 2, 1, 0}, kOrderV[kRows] = {0, 0, 1, 0, 1, 2};
+
+// values rows first_row <= r < end_row at a G x G cell's points from its coefficients y.
+template <int G>
+[[gnu::always_inline]] inline void tensor_values(const double* __restrict y, double size, Eigen::Index first,
+                                                 Eigen::Index p, int first_row, int end_row,
+                                                 double* __restrict values) {
+  const CubicTable& table = cubic_table(G);
+  const Eigen::Index axes = kRows * p;
+  // Along u first: t[du][bv][axis] over the grid row's points.
+  bool used[3] = {false, false, false};
+  for (int r = first_row; r < end_row; ++r) used[kOrderU[r]] = true;
+  Lanes t[3][4][3];
+  for (int du = 0; du < 3; ++du) {
+    if (!used[du]) continue;
     _Pragma("GCC unroll 16")
-    for (int ax = 0; ax < 3; ++ax) {
+    for (int bv = 0; bv < 4; ++bv) {
+      Lanes s0{}, s1{}, s2{};
       _Pragma("GCC unroll 16")
-      for (int i = 0; i < kChunks; ++i) store(out + ax * axes + kLanes * i, scale * acc[ax][i]);
+      for (int bu = 0; bu < 4; ++bu) {
+        const Lanes b = load<Lanes>(table.over_points[du][bu]);
+        s0 += b * y[bu + 4 * bv];
+        s1 += b * y[16 + bu + 4 * bv];
+        s2 += b * y[32 + bu + 4 * bv];
+      }
+      t[du][bv][0] = s0, t[du][bv][1] = s1, t[du][bv][2] = s2;
+    }
+  }
+  // Then along v, at each grid row j.
+  for (int r = first_row; r < end_row; ++r) {
+    const double scale = row_scale(r, size);
+    const int du = kOrderU[r], dv = kOrderV[r];
+    double* __restrict out = values + r * p + first;
+    for (int j = 0; j < G; ++j) {
       _Pragma("GCC unroll 16")
-      for (int t = 0; t < kTail; ++t) out[ax * axes + kLanes * kChunks + t] = scale * tail[ax][t];
+      for (int ax = 0; ax < 3; ++ax) {
+        Lanes v{};
+        _Pragma("GCC unroll 16")
+        for (int bv = 0; bv < 4; ++bv) v += table.over_points[dv][bv][j] * t[du][bv][ax];
+        v *= scale;
+        double* __restrict at = out + ax * axes + G * j;
+        if constexpr (G == 4) {
+          store(at, v);
+        } else {
+          _Pragma("GCC unroll 16")
+          for (int i = 0; i < G; ++i) at[i] = v[i];
+        }
+      }
     }
   }
 }
 
-// f (m x 3) += the piece's share of W^T coef over rows first_row <= r < end_row.
-template <int N>
-[[gnu::always_inline]] inline void bernstein_transpose(const double* __restrict w, Eigen::Index w_rows,
-                                                       Eigen::Index m, double size, const double* __restrict basis,
-                                                       Eigen::Index first, Eigen::Index p, int first_row,
-                                                       int end_row, const double* __restrict coef,
-                                                       double* __restrict f) {
+// f (m x 3) += a G x G cell's share of W^T coef over rows first_row <= r < end_row.
+template <int G>
+[[gnu::always_inline]] inline void tensor_transpose(const double* __restrict w, Eigen::Index w_rows, Eigen::Index m,
+                                                    double size, Eigen::Index first, Eigen::Index p,
+                                                    int first_row, int end_row, const double* __restrict coef,
+                                                    double* __restrict f) {
+  const CubicTable& table = cubic_table(G);
   const Eigen::Index axes = kRows * p;
-  Lanes z[3][4] = {};
+  // Along v first: s[du][bv][axis] over a grid row's points.
+  Lanes s[3][4][3] = {};
+  bool used[3] = {false, false, false};
   for (int r = first_row; r < end_row; ++r) {
     const double scale = row_scale(r, size);
+    const int du = kOrderU[r], dv = kOrderV[r];
+    used[du] = true;
     const double* __restrict c = coef + r * p + first;
-    for (int q = 0; q < N; ++q) {
-      const double* __restrict b = basis + 16 * (r * N + q);
-      const double c0 = scale * c[q], c1 = scale * c[axes + q], c2 = scale * c[2 * axes + q];
+    for (int j = 0; j < G; ++j) {
       _Pragma("GCC unroll 16")
-      for (int i = 0; i < 4; ++i) {
-        const Lanes bi = load<Lanes>(b + 4 * i);
-        z[0][i] += bi * c0;
-        z[1][i] += bi * c1;
-        z[2][i] += bi * c2;
+      for (int ax = 0; ax < 3; ++ax) {
+        const double* __restrict at = c + ax * axes + G * j;
+        Lanes cj;
+        if constexpr (G == 4) {
+          cj = load<Lanes>(at);
+        } else {
+          cj = Lanes{at[0], at[1], at[2], 0.0};
+        }
+        cj *= scale;
+        _Pragma("GCC unroll 16")
+        for (int bv = 0; bv < 4; ++bv) s[du][bv][ax] += table.over_points[dv][bv][j] * cj;
+      }
+    }
+  }
+  // Then along u: z[axis][bv] over the coefficients bu (k = bu + 4 bv, as the basis's columns).
+  Lanes z[3][4] = {};
+  for (int du = 0; du < 3; ++du) {
+    if (!used[du]) continue;
+    _Pragma("GCC unroll 16")
+    for (int i = 0; i < G; ++i) {
+      const Lanes b = load<Lanes>(table.over_coefficients[du][i]);
+      _Pragma("GCC unroll 16")
+      for (int bv = 0; bv < 4; ++bv) {
+        _Pragma("GCC unroll 16")
+        for (int ax = 0; ax < 3; ++ax) z[ax][bv] += b * s[du][bv][ax][i];
       }
     }
   }
@@ -340,9 +412,9 @@ template <int N>
     double y[48];
     bernstein_coefficients(w, w_rows, m, u, y);
     if (n == 16) {
-      bernstein_values<16>(y, size, bernstein, first, p, first_row, end_row, values);
+      tensor_values<4>(y, size, first, p, first_row, end_row, values);
     } else {
-      bernstein_values<9>(y, size, bernstein, first, p, first_row, end_row, values);
+      tensor_values<3>(y, size, first, p, first_row, end_row, values);
     }
     return;
   }
@@ -406,11 +478,11 @@ template <int N>
                                                          double* __restrict f) {
   const Eigen::Index stride = kRows * p;
   if (size > 0.0 && n == 16) {
-    bernstein_transpose<16>(w, w_rows, m, size, bernstein, first, p, first_row, end_row, coef, f);
+    tensor_transpose<4>(w, w_rows, m, size, first, p, first_row, end_row, coef, f);
     return;
   }
   if (size > 0.0 && n == 9) {
-    bernstein_transpose<9>(w, w_rows, m, size, bernstein, first, p, first_row, end_row, coef, f);
+    tensor_transpose<3>(w, w_rows, m, size, first, p, first_row, end_row, coef, f);
     return;
   }
   if (size > 0.0) {
