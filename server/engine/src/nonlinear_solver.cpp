@@ -304,10 +304,10 @@ bool Run::rows_met(const Eigen::VectorXd& g, const Eigen::VectorXd& u) const {
 
 Eigen::VectorXd Run::tangent_times(const Eigen::VectorXd& v, double lambda, bool by_difference) {
   Eigen::VectorXd jv;
-  const double largest = v.cwiseAbs().maxCoeff();
+  const double largest = by_difference ? v.cwiseAbs().maxCoeff() : 0.0;
   if (approximate_) {
     shell_.approximate_tangent_product(coarse_, lambda * pressure_, v, jv);
-  } else if (by_difference && largest > 0.0 && std::isfinite(largest)) {
+  } else if (largest > 0.0 && std::isfinite(largest)) {
     // No control point moves by more than sqrt(epsilon) of the object's size: the error of a
     // forward difference (the forces' curvature times the step) and its round-off balance there.
     const double h = 1.5e-8 * length_ / largest;
