@@ -211,6 +211,42 @@ TEST(CholeskyFactor, ReusesTheAnalysisForAnotherMatrixOfThePattern) {
   EXPECT_LT(relative_error(first->backward(first->forward(b)), Eigen::LLT<Eigen::MatrixXd>(dense).solve(b)), 1e-11);
 }
 
+// A factor that is let go of is refactored in place by the next factorization of its analysis
+// (the CHOLMOD build keeps two), also after a failed one left it: each answer as from scratch.
+TEST(CholeskyFactor, RefactorsIntoAFactorLetGo) {
+  Eigen::Matrix3d block;
+  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const Sparse a = with_blocks(grid_laplacian(30, 30, 0.05), block);  // large enough to be supernodal
+  auto scaled_diagonal = [&](double factor) {
+    Sparse out = a;
+    for (Eigen::Index j = 0; j < out.outerSize(); ++j) {
+      for (Sparse::InnerIterator it(out, j); it; ++it) {
+        if (it.row() == it.col()) it.valueRef() *= factor;
+      }
+    }
+    return out;
+  };
+  const Sparse stiffer = scaled_diagonal(1.5), indefinite = scaled_diagonal(-1.0);
+  const Eigen::MatrixXd b = random_rhs(a.rows(), 2, 5);
+  auto expect_solves = [&](const CholeskyFactor& f, const Sparse& m, const char* what) {
+    const Eigen::SimplicialLLT<Sparse> reference(m);
+    ASSERT_EQ(reference.info(), Eigen::Success);
+    EXPECT_LT(relative_error(f.backward(f.forward(b)), reference.solve(b)), 1e-11) << what;
+  };
+  const auto first = factor_of(a);
+  ASSERT_TRUE(first);
+  for (int round = 0; round < 3; ++round) {
+    { const auto let_go = factor_of(stiffer, first.get()); }
+    CholeskyFactor::Failure failure;
+    EXPECT_FALSE(CholeskyFactor::factorize(upper_of(indefinite), first.get(), failure));
+    EXPECT_GE(failure.column, 0);
+    const auto again = factor_of(stiffer, first.get());
+    ASSERT_TRUE(again);
+    expect_solves(*again, stiffer, "refactored after a failure");
+  }
+  expect_solves(*first, a, "the first factor, untouched");
+}
+
 // Expects factorize() to refuse `a`, name a column in range and say whether A held non-finite
 // values.
 void expect_refused(const Sparse& a, const char* what, bool not_finite = false, Eigen::Index expected_column = -1) {

@@ -3,9 +3,12 @@
 // forward sweep of our own over the supernodes local right-hand sides reach.
 #include "cholesky_factor.h"
 
+#include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <iterator>
 #include <limits>
 #include <mutex>
 #include <vector>
@@ -101,6 +104,66 @@ std::unique_lock<std::mutex> blas_turn() {
   return g_blas.thread_unsafe ? std::unique_lock<std::mutex>(g_blas_mutex) : std::unique_lock<std::mutex>();
 }
 
+// Factors let go of are kept for the next factorization of the same analysis: CHOLMOD refactors a
+// factor in place (cholmod_factorize on a numeric L), where a new factor is a copy, in fresh
+// memory when it is larger than what the allocator keeps (engine::keep_freed_memory_for_reuse),
+// and on a VM fresh pages are dear (about 12 us each). Measured on the 2-core EPYC VM: a
+// refactorization of spot_quadrangulated's tangent faulted in 9,100 pages (35 MB) and took
+// 200-215 ms; refactored in place, 102-108 ms. At most two are kept, whatever their pattern
+// (memory a host's budget does not see, so it stays small); a factor that a failed
+// factorization left (columns from the failure on are zero) is as good as any.
+class SpareFactors {
+ public:
+  SpareFactors() { cholmod_start(&common_); }
+  ~SpareFactors() {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    for (auto& [analysis, l] : spare_) cholmod_free_factor(&l, &common_);
+    spare_.clear();
+    alive_ = false;
+    cholmod_finish(&common_);
+  }
+  SpareFactors(const SpareFactors&) = delete;
+  SpareFactors& operator=(const SpareFactors&) = delete;
+
+  // A kept factor of `analysis`, or null.
+  cholmod_factor* take(uint64_t analysis) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    for (auto it = spare_.rbegin(); it != spare_.rend(); ++it) {
+      if (it->first != analysis) continue;
+      cholmod_factor* l = it->second;
+      spare_.erase(std::next(it).base());
+      return l;
+    }
+    return nullptr;
+  }
+  // Keeps l (supernodal, of `analysis`) for a later take, dropping the oldest beyond two; frees
+  // anything else.
+  void keep(uint64_t analysis, cholmod_factor* l) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    if (!alive_ || !l->is_super) {
+      cholmod_free_factor(&l, &common_);
+      return;
+    }
+    spare_.emplace_back(analysis, l);
+    while (spare_.size() > kMaxSpare) {
+      cholmod_free_factor(&spare_.front().second, &common_);
+      spare_.erase(spare_.begin());
+    }
+  }
+
+ private:
+  static constexpr size_t kMaxSpare = 2;
+  std::mutex mutex_;
+  cholmod_common common_;  // for freeing (it only counts memory)
+  std::vector<std::pair<uint64_t, cholmod_factor*>> spare_;  // oldest first
+  bool alive_ = true;
+};
+
+// Built when the library loads, before any factor exists, so it outlives them all.
+SpareFactors g_spare_factors;
+// Each analysis (ordering and supernodes) gets an id; factors made from a copy of it share it.
+std::atomic<uint64_t> g_next_analysis{1};
+
 // Calls visit(column, diagonal entry of L) for every column until it returns true; the column
 // where it did, or -1. (Supernodal: the diagonal of each supernode's dense block.)
 template <class Visit>
@@ -134,9 +197,10 @@ Eigen::Index first_nonfinite_pivot(const cholmod_factor* l) {
 
 struct CholeskyFactor::State {
   cholmod_factor* l = nullptr;
+  uint64_t analysis = 0;              // which analysis l is of (SpareFactors)
   std::vector<int32_t> supernode_of;  // per factor column, for a supernodal factor
   ~State() {
-    if (l) cholmod_free_factor(&l, thread_common());
+    if (l) g_spare_factors.keep(analysis, l);
   }
 
   // Runs CHOLMOD's solve of `system` (CHOLMOD_L, _Lt, _P, _Pt, _A) on a block of right-hand sides.
@@ -171,14 +235,15 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
   a.packed = 1;
 
   cholmod_common* c = thread_common();
-  cholmod_factor* l = nullptr;
+  const uint64_t analysis = same_pattern ? same_pattern->state_->analysis : g_next_analysis++;
+  // A factor of the same analysis carries its ordering and supernodes: factorizing into it skips
+  // the analysis. A kept one (SpareFactors) is refactored in place, else a copy is made.
+  cholmod_factor* l = same_pattern ? g_spare_factors.take(analysis) : nullptr;
   bool ok = false;
   {
     const auto turn = blas_turn();
-    // A copy of a factor of the same pattern carries its ordering and supernodes: factorizing
-    // into it skips the analysis.
     configure(c, a.nrow);
-    l = same_pattern ? cholmod_copy_factor(same_pattern->state_->l, c) : cholmod_analyze(&a, c);
+    if (!l) l = same_pattern ? cholmod_copy_factor(same_pattern->state_->l, c) : cholmod_analyze(&a, c);
     ok = l && cholmod_factorize(&a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
   }
   // CHOLMOD stops at a pivot that is not positive but passes NaN through (simplicial: NaN <= 0
@@ -191,7 +256,7 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
       failure.not_finite = true;
       const auto* perm = static_cast<const int*>(l->Perm);
       failure.column = perm ? perm[bad] : bad;
-      cholmod_free_factor(&l, c);
+      g_spare_factors.keep(analysis, l);
       return nullptr;
     }
   }
@@ -201,11 +266,16 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
       const auto* perm = static_cast<const int*>(l->Perm);
       failure.column = perm ? perm[l->minor] : static_cast<Eigen::Index>(l->minor);
     }
-    if (l) cholmod_free_factor(&l, c);
+    if (l && failure.out_of_memory) {
+      cholmod_free_factor(&l, c);
+    } else if (l) {
+      g_spare_factors.keep(analysis, l);
+    }
     return nullptr;
   }
   auto state = std::make_unique<State>();
   state->l = l;
+  state->analysis = analysis;
   if (l->is_super) {
     const auto* super = static_cast<const int*>(l->super);
     state->supernode_of.resize(l->n);
