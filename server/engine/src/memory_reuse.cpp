@@ -10,7 +10,7 @@ void keep_freed_memory_for_reuse() {
 #if defined(__GLIBC__)
   // Fixed thresholds also turn off glibc's own adjustment of them (which follows the sizes freed).
   mallopt(M_MMAP_THRESHOLD, 32 << 20);
-  mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  mallopt(M_TRIM_THRESHOLD, 64 << 20);
 #endif
 }
 
