@@ -13,7 +13,6 @@
 #pragma GCC diagnostic pop
 
 #include "demo.h"
-#include "softshell/engine/memory_reuse.h"
 
 namespace {
 
@@ -117,7 +116,6 @@ softshell::Result<void> set_material(Args& a) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  softshell::engine::keep_freed_memory_for_reuse();  // as softshell-server does
   CLI::App app(kDescription, "softshell-demo");
   app.footer(kFooter);
   app.set_version_flag("--version", std::string("softshell-demo ") + SOFTSHELL_VERSION_STRING, "print the version and exit");

@@ -30,7 +30,6 @@
 
 #include "bench_support.h"
 #include "shell_benchmarks.h"
-#include "softshell/engine/memory_reuse.h"
 #include "softshell/engine/nonlinear_solver.h"
 #include "softshell/engine/solver.h"
 #include "softshell/interaction.h"
@@ -344,7 +343,6 @@ const char* paper_row(int control_points) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  engine::keep_freed_memory_for_reuse();  // measured as softshell-server runs
   const int warm_solves = argc > 1 ? std::max(1, std::atoi(argv[1])) : 50;
   const int max_scaling_dofs = argc > 2 ? std::atoi(argv[2]) : 100'000;
   const bool supports_only = argc > 3 && std::string(argv[3]) == "supports";

@@ -20,7 +20,6 @@
 #pragma GCC diagnostic ignored "-Wnull-dereference"
 #include <CLI/CLI.hpp>
 
-#include "softshell/engine/memory_reuse.h"
 #include "softshell/http/auth.h"
 #include "softshell/http/server.h"
 #include "softshell/service/log.h"
@@ -174,7 +173,6 @@ std::optional<int> parse(CLI::App& app, int argc, char** argv) {
 
 int main(int argc, char** argv) {
   using namespace softshell;
-  engine::keep_freed_memory_for_reuse();  // the server is the process: solves reuse their memory
   CLI::App app(kDescription, "softshell-server");
   app.footer(kFooter);
   app.set_version_flag("--version", std::string("softshell-server ") + SOFTSHELL_VERSION_STRING,

@@ -19,6 +19,9 @@
 #include "softshell/result.h"
 
 namespace softshell::engine::internal {
+
+std::atomic<size_t> g_spare_factor_bytes{8u << 20};
+
 namespace {
 
 // CHOLMOD's settings for a factorization of `rows` rows (all of them: a thread's common keeps
@@ -104,14 +107,16 @@ std::unique_lock<std::mutex> blas_turn() {
   return g_blas.thread_unsafe ? std::unique_lock<std::mutex>(g_blas_mutex) : std::unique_lock<std::mutex>();
 }
 
-// Factors let go of are kept for the next factorization of the same analysis: CHOLMOD refactors a
-// factor in place (cholmod_factorize on a numeric L), where a new factor is a copy, in fresh
-// memory when it is larger than what the allocator keeps (engine::keep_freed_memory_for_reuse),
-// and on a VM fresh pages are dear (about 12 us each). Measured on the 2-core EPYC VM: a
-// refactorization of spot_quadrangulated's tangent faulted in 9,100 pages (35 MB) and took
-// 200-215 ms; refactored in place, 102-108 ms. At most two are kept, whatever their pattern
-// (memory a host's budget does not see, so it stays small); a factor that a failed
-// factorization left (columns from the failure on are zero) is as good as any.
+// Large factors let go of are kept for the next factorization of the same analysis: CHOLMOD
+// refactors a factor in place (cholmod_factorize on a numeric L), where a new factor is a copy in
+// memory the allocator takes fresh from the system at this size, and on a VM a fresh page costs
+// about 12 us. Measured on the 2-core EPYC VM: a refactorization of spot_quadrangulated's tangent
+// (a 35 MB factor) faulted in 9,100 pages and took 200-215 ms; refactored in place, 102-108 ms.
+// Smaller factors are left to the allocator, which reuses their memory (catmark_righthanded's
+// 3.3 MB factor: kept, its refactorizations alternated between 9 and 14-16 ms, as CHOLMOD's
+// temporaries then came from fresh pages every other time). At most two are kept, whatever
+// their pattern (memory a host's budget does not see, so it stays small); a factor that a
+// failed factorization left (columns from the failure on are zero) is as good as any.
 class SpareFactors {
  public:
   SpareFactors() { cholmod_start(&common_); }
@@ -136,11 +141,11 @@ class SpareFactors {
     }
     return nullptr;
   }
-  // Keeps l (supernodal, of `analysis`) for a later take, dropping the oldest beyond two; frees
-  // anything else.
+  // Keeps l (supernodal, of `analysis`, at least g_spare_factor_bytes) for a later take,
+  // dropping the oldest beyond two; frees anything else.
   void keep(uint64_t analysis, cholmod_factor* l) {
     const std::lock_guard<std::mutex> lock(mutex_);
-    if (!alive_ || !l->is_super) {
+    if (!alive_ || !l->is_super || l->xsize * sizeof(double) < g_spare_factor_bytes.load()) {
       cholmod_free_factor(&l, &common_);
       return;
     }

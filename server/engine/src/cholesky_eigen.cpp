@@ -27,6 +27,9 @@
 #include <Eigen/OrderingMethods>
 
 namespace softshell::engine::internal {
+
+std::atomic<size_t> g_spare_factor_bytes{8u << 20};  // the CHOLMOD build's (cholesky_factor.h)
+
 namespace {
 
 using Block = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;

@@ -9,6 +9,7 @@
 //            here (MPL-2.0 Eigen headers only; no BLAS, no SuiteSparse library).
 // Both are thread-safe once built: any number of threads may call forward/backward at once.
 
+#include <atomic>
 #include <cstddef>
 #include <memory>
 
@@ -16,6 +17,11 @@
 #include <Eigen/SparseCore>
 
 namespace softshell::engine::internal {
+
+/// CHOLMOD build: factors of at least this many bytes of values that are let go of are kept (at
+/// most two) and refactored into by the next factorization of their analysis (8 MB; tests lower
+/// it). The Eigen build ignores it.
+extern std::atomic<size_t> g_spare_factor_bytes;
 
 class CholeskyFactor {
  public:
