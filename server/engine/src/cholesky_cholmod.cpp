@@ -111,7 +111,7 @@ std::unique_lock<std::mutex> blas_turn() {
 // refactors a factor in place (cholmod_factorize on a numeric L), where a new factor is a copy in
 // memory the allocator takes fresh from the system at this size, and on a VM a fresh page costs
 // about 12 us. Measured on the 2-core EPYC VM: a refactorization of spot_quadrangulated's tangent
-// (a 35 MB factor) faulted in 9,100 pages and took 200-215 ms; refactored in place, 102-108 ms.
+// (a 35 MB factor) faulted in 9,100 pages and took 200-215 ms; refactored in place, 102-138 ms.
 // Smaller factors are left to the allocator, which reuses their memory (catmark_righthanded's
 // 3.3 MB factor: kept, its refactorizations alternated between 9 and 14-16 ms, as CHOLMOD's
 // temporaries then came from fresh pages every other time). At most two are kept, whatever
