@@ -100,6 +100,16 @@ Sparse dense_spd(int n, unsigned seed) {
   return a.sparseView();
 }
 
+// The same pattern with the diagonal times `factor` (a tangent stiffness beside K; negative: indefinite).
+Sparse with_scaled_diagonal(Sparse a, double factor) {
+  for (Eigen::Index j = 0; j < a.outerSize(); ++j) {
+    for (Sparse::InnerIterator it(a, j); it; ++it) {
+      if (it.row() == it.col()) it.valueRef() *= factor;
+    }
+  }
+  return a;
+}
+
 Eigen::MatrixXd random_rhs(Eigen::Index rows, Eigen::Index cols, unsigned seed) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -194,12 +204,7 @@ TEST(CholeskyFactor, ReusesTheAnalysisForAnotherMatrixOfThePattern) {
   Eigen::Matrix3d block;
   block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
   const Sparse a = with_blocks(grid_laplacian(10, 8, 0.2), block);
-  Sparse a2 = a;  // same pattern, other values (a tangent stiffness beside K)
-  for (Eigen::Index j = 0; j < a2.outerSize(); ++j) {
-    for (Sparse::InnerIterator it(a2, j); it; ++it) {
-      if (it.row() == it.col()) it.valueRef() *= 1.5;
-    }
-  }
+  const Sparse a2 = with_scaled_diagonal(a, 1.5);  // same pattern, other values
   const auto first = factor_of(a);
   ASSERT_TRUE(first);
   const auto second = factor_of(a2, first.get());
@@ -222,16 +227,7 @@ TEST(CholeskyFactor, RefactorsIntoAFactorLetGo) {
   Eigen::Matrix3d block;
   block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
   const Sparse a = with_blocks(grid_laplacian(30, 30, 0.05), block);  // large enough to be supernodal
-  auto scaled_diagonal = [&](double factor) {
-    Sparse out = a;
-    for (Eigen::Index j = 0; j < out.outerSize(); ++j) {
-      for (Sparse::InnerIterator it(out, j); it; ++it) {
-        if (it.row() == it.col()) it.valueRef() *= factor;
-      }
-    }
-    return out;
-  };
-  const Sparse stiffer = scaled_diagonal(1.5), indefinite = scaled_diagonal(-1.0);
+  const Sparse stiffer = with_scaled_diagonal(a, 1.5), indefinite = with_scaled_diagonal(a, -1.0);
   const Eigen::MatrixXd b = random_rhs(a.rows(), 2, 5);
   auto expect_solves = [&](const CholeskyFactor& f, const Sparse& m, const char* what) {
     const Eigen::SimplicialLLT<Sparse> reference(m);
