@@ -13,6 +13,7 @@
 #pragma GCC diagnostic pop
 
 #include "demo.h"
+#include "softshell/malloc_tuning.h"
 
 namespace {
 
@@ -130,6 +131,7 @@ int main(int argc, char** argv) {
     std::cerr << "softshell-demo: " << e.what() << "\n(see softshell-demo --help)\n";
     return 2;
   }
+  softshell::tune_malloc_for_solves();  // as softshell-server does (softshell/malloc_tuning.h)
   if (auto ok = set_material(a); !ok) {
     std::cerr << "softshell-demo: " << ok.error().message << "\n";
     return 2;

@@ -21,12 +21,15 @@
 //                      drag | nonlinear drag steps = 20, 0 = none]
 // SOFTSHELL_BENCH_STEPS=1 prints each drag step's statistics; SOFTSHELL_BENCH_EXACT_DIRECTIONS=1 solves
 // the Newton directions on the exact tangent (NonlinearOptions::approximate_directions = false);
-// SOFTSHELL_BENCH_MESH=NAME drags only that mesh.
+// SOFTSHELL_BENCH_MESH=NAME drags only that mesh. malloc is set up as softshell-server sets it
+// (tune_malloc_for_solves); SOFTSHELL_BENCH_DEFAULT_MALLOC=1 leaves glibc's defaults.
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
 #include <map>
 #include <random>
+
+#include <sys/resource.h>
 
 #include "bench_support.h"
 #include "shell_benchmarks.h"
@@ -35,6 +38,7 @@
 #include "softshell/interaction.h"
 #include "softshell/level_of_detail.h"
 #include "softshell/limit_evaluator.h"
+#include "softshell/malloc_tuning.h"
 #include "softshell/tessellation.h"
 #include "test_meshes.h"
 
@@ -145,6 +149,13 @@ double cpu_ms() {
   return 1e3 * static_cast<double>(t.tv_sec) + 1e-6 * static_cast<double>(t.tv_nsec);
 }
 
+// Pages faulted in so far (on a VM each fresh page can cost microseconds: see docs/benchmarks.md).
+long minor_faults() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_minflt;
+}
+
 struct DragMeasurement {
   int dofs = 0, points = 0, steps = 0;
   double first_ms = 0.0;                  // first nonlinear solve: basis evaluation, K factor
@@ -201,7 +212,9 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
     request.limit_constraints[0].displacement = (0.3 * k / steps) * direction;
     t0 = bench::Clock::now();
     const double cpu0 = cpu_ms();
+    const long faults0 = minor_faults();
     auto step = solver.solve(request, u);
+    const long faults = minor_faults() - faults0;
     const double ms = bench::ms_since(t0);
     cpu_times.push_back(cpu_ms() - cpu0);
     if (!step.ok()) {
@@ -212,9 +225,9 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
     const engine::NonlinearStats& s = step->stats;
     if (std::getenv("SOFTSHELL_BENCH_STEPS")) {
       std::printf("  step %d: %.1f ms, %d Newton (%d approximate, %d by differences, %d evaluations), %d Krylov, %d factors; "
-                  "forces %.1f ms, Krylov %.1f ms, tangents %.1f ms\n", k, ms, s.iterations, s.approximate_iterations,
-                  s.difference_iterations, s.evaluations, s.krylov_iterations, s.factorizations, s.evaluate_ms,
-                  s.krylov_ms, s.tangent_ms);
+                  "forces %.1f ms, Krylov %.1f ms, tangents %.1f ms; %ld pages faulted in\n", k, ms, s.iterations,
+                  s.approximate_iterations, s.difference_iterations, s.evaluations, s.krylov_iterations, s.factorizations,
+                  s.evaluate_ms, s.krylov_ms, s.tangent_ms, faults);
       std::fflush(stdout);  // a long drag shows its progress, also into a file
     }
     result.iterations += s.iterations;
@@ -239,8 +252,10 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   // The same grab from rest in one request (the basis and the factor of K are the model's, cached
   // by the first solve; a solve from rest uses neither the drag's tangent nor its history).
   t0 = bench::Clock::now();
+  const long one_faults0 = minor_faults();
   auto one = solver.solve(request);
   result.one_shot_ms = bench::ms_since(t0);
+  const long one_faults = minor_faults() - one_faults0;
   if (!one.ok()) {
     result.error = "one request: " + one.error().message;
     return result;
@@ -248,9 +263,9 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   if (std::getenv("SOFTSHELL_BENCH_STEPS")) {
     const engine::NonlinearStats& s = one->stats;
     std::printf("  from rest: %.1f ms, %d load steps, %d Newton (%d approximate, %d by differences, %d evaluations), "
-                "%d Krylov, %d factors; forces %.1f ms, Krylov %.1f ms, tangents %.1f ms\n", result.one_shot_ms,
-                s.load_steps, s.iterations, s.approximate_iterations, s.difference_iterations, s.evaluations,
-                s.krylov_iterations, s.factorizations, s.evaluate_ms, s.krylov_ms, s.tangent_ms);
+                "%d Krylov, %d factors; forces %.1f ms, Krylov %.1f ms, tangents %.1f ms; %ld pages faulted in\n",
+                result.one_shot_ms, s.load_steps, s.iterations, s.approximate_iterations, s.difference_iterations,
+                s.evaluations, s.krylov_iterations, s.factorizations, s.evaluate_ms, s.krylov_ms, s.tangent_ms, one_faults);
   }
   result.one_shot_iterations = one->stats.iterations;
   result.one_shot_load_steps = one->stats.load_steps;
@@ -343,6 +358,8 @@ const char* paper_row(int control_points) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // As softshell-server runs (softshell/malloc_tuning.h), unless asked for glibc's defaults.
+  if (std::getenv("SOFTSHELL_BENCH_DEFAULT_MALLOC") == nullptr) tune_malloc_for_solves();
   const int warm_solves = argc > 1 ? std::max(1, std::atoi(argv[1])) : 50;
   const int max_scaling_dofs = argc > 2 ? std::atoi(argv[2]) : 100'000;
   const bool supports_only = argc > 3 && std::string(argv[3]) == "supports";

@@ -6,8 +6,10 @@
 // budget in use, results kept and dropped) and fails if any request was not answered 200.
 //
 // usage: bench_soak [requests in total, default 40000] [clients, default 4]
+// malloc is set up as softshell-server sets it; SOFTSHELL_BENCH_DEFAULT_MALLOC=1 leaves glibc's defaults.
 #include <atomic>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <random>
 #include <thread>
@@ -16,6 +18,7 @@
 #include "bench_support.h"
 #include "softshell/http/server.h"
 #include "softshell/limit_evaluator.h"
+#include "softshell/malloc_tuning.h"
 #include "softshell/service/service.h"
 #include "softshell/wire.h"
 #include "test_meshes.h"
@@ -46,6 +49,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "usage: bench_soak [requests > 0] [clients > 0]\n");
     return 2;
   }
+  // As softshell-server runs (softshell/malloc_tuning.h), unless asked for glibc's defaults.
+  if (std::getenv("SOFTSHELL_BENCH_DEFAULT_MALLOC") == nullptr) tune_malloc_for_solves();
   service::ServiceOptions options;  // the server's defaults: retention keeps the newest 1,000
   auto svc = std::make_shared<service::Service>(options);
   http::HttpServer server(svc);

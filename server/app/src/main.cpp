@@ -22,6 +22,7 @@
 
 #include "softshell/http/auth.h"
 #include "softshell/http/server.h"
+#include "softshell/malloc_tuning.h"
 #include "softshell/service/log.h"
 #include "softshell/service/service.h"
 
@@ -217,6 +218,10 @@ int main(int argc, char** argv) {
   http_options.logger = logger;
   for (const std::string& w : token_warnings) logger.warning(w);
   http_options.reserved_connections = std::min(http_options.reserved_connections, http_options.max_connections / 2);
+
+  // Solves allocate buffers of megabytes again and again: freed memory is kept for the next one
+  // instead of being faulted in anew (softshell/malloc_tuning.h).
+  tune_malloc_for_solves();
 
   // Every open connection and event stream is a descriptor: the soft limit (often 1024) is
   // raised to the hard one.
