@@ -27,9 +27,13 @@ long faults_of_one_round() {
   const long before = minor_faults();
   std::vector<char*> blocks;
   for (int i = 0; i < 3; ++i) {
-    blocks.push_back(static_cast<char*>(std::malloc(kBytes)));
-    EXPECT_NE(blocks.back(), nullptr);
-    std::memset(blocks.back(), i + 1, kBytes);
+    char* block = static_cast<char*>(std::malloc(kBytes));
+    if (block == nullptr) {
+      ADD_FAILURE() << "out of memory";
+      break;
+    }
+    std::memset(block, i + 1, kBytes);
+    blocks.push_back(block);
   }
   for (auto it = blocks.rbegin(); it != blocks.rend(); ++it) std::free(*it);
   return minor_faults() - before;

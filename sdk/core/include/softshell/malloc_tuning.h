@@ -10,8 +10,8 @@
 /// the pull from rest faulted in 1,000-2,800 pages (323-394 ms; none and 304-342 ms with this),
 /// and preconditioner refreshes that faulted took 30-40 ms instead of 18-19 ms.
 ///
-/// softshell-server, the demo, bench_engine and bench_soak call this at start. A host that embeds the SDK
-/// decides for its own process: call it early in `main`, or start the process with
+/// softshell-server, the demo, bench_engine and bench_soak call this at start. A host that embeds
+/// the SDK decides for its own process: call it early in `main`, or start the process with
 /// `GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=67108864`
 /// (the same settings), or leave malloc as it is (the answers are the same, slower).
 
@@ -20,8 +20,8 @@ namespace softshell {
 /// Keeps freed memory for reuse: blocks below 32 MiB come from the heap instead of their own
 /// mappings, and up to 64 MiB free at the top of a heap stay with the process (glibc's own
 /// upper limits for the thresholds it otherwise adapts on the way). Process-wide and meant to be
-/// called once, before other threads allocate. Returns false, changing nothing, where malloc is
-/// not glibc's (another C library, or a sanitizer's allocator).
+/// called once, before other threads allocate. Returns whether glibc took both settings: false
+/// where malloc is not glibc's (another C library, or a sanitizer's allocator).
 bool tune_malloc_for_solves();
 
 }  // namespace softshell
