@@ -13,7 +13,7 @@
 /// softshell-server, the demo, bench_engine and bench_soak call this at start. A host that embeds
 /// the SDK decides for its own process: call it early in `main`, or start the process with
 /// `GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=67108864`
-/// (the same settings), or leave malloc as it is (the answers are the same, slower).
+/// (the same settings), or leave malloc as it is (answers to the same tolerance, slower).
 
 namespace softshell {
 
