@@ -29,8 +29,6 @@
 #include <map>
 #include <random>
 
-#include <sys/resource.h>
-
 #include "bench_support.h"
 #include "shell_benchmarks.h"
 #include "softshell/engine/nonlinear_solver.h"
@@ -38,7 +36,6 @@
 #include "softshell/interaction.h"
 #include "softshell/level_of_detail.h"
 #include "softshell/limit_evaluator.h"
-#include "softshell/malloc_tuning.h"
 #include "softshell/tessellation.h"
 #include "test_meshes.h"
 
@@ -149,13 +146,6 @@ double cpu_ms() {
   return 1e3 * static_cast<double>(t.tv_sec) + 1e-6 * static_cast<double>(t.tv_nsec);
 }
 
-// Pages faulted in so far (on a VM each fresh page can cost microseconds: see docs/benchmarks.md).
-long minor_faults() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return usage.ru_minflt;
-}
-
 struct DragMeasurement {
   int dofs = 0, points = 0, steps = 0;
   double first_ms = 0.0;                  // first nonlinear solve: basis evaluation, K factor
@@ -212,10 +202,10 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
     request.limit_constraints[0].displacement = (0.3 * k / steps) * direction;
     t0 = bench::Clock::now();
     const double cpu0 = cpu_ms();
-    const long faults0 = minor_faults();
+    const long faults0 = bench::minor_faults();
     auto step = solver.solve(request, u);
-    const long faults = minor_faults() - faults0;
     const double ms = bench::ms_since(t0);
+    const long faults = bench::minor_faults() - faults0;
     cpu_times.push_back(cpu_ms() - cpu0);
     if (!step.ok()) {
       result.error = "step " + std::to_string(k) + ": " + step.error().message;
@@ -252,10 +242,10 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   // The same grab from rest in one request (the basis and the factor of K are the model's, cached
   // by the first solve; a solve from rest uses neither the drag's tangent nor its history).
   t0 = bench::Clock::now();
-  const long one_faults0 = minor_faults();
+  const long one_faults0 = bench::minor_faults();
   auto one = solver.solve(request);
   result.one_shot_ms = bench::ms_since(t0);
-  const long one_faults = minor_faults() - one_faults0;
+  const long one_faults = bench::minor_faults() - one_faults0;
   if (!one.ok()) {
     result.error = "one request: " + one.error().message;
     return result;
@@ -358,8 +348,7 @@ const char* paper_row(int control_points) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  // As softshell-server runs (softshell/malloc_tuning.h), unless asked for glibc's defaults.
-  if (std::getenv("SOFTSHELL_BENCH_DEFAULT_MALLOC") == nullptr) tune_malloc_for_solves();
+  bench::malloc_as_the_server();
   const int warm_solves = argc > 1 ? std::max(1, std::atoi(argv[1])) : 50;
   const int max_scaling_dofs = argc > 2 ? std::atoi(argv[2]) : 100'000;
   const bool supports_only = argc > 3 && std::string(argv[3]) == "supports";

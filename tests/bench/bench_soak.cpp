@@ -18,7 +18,6 @@
 #include "bench_support.h"
 #include "softshell/http/server.h"
 #include "softshell/limit_evaluator.h"
-#include "softshell/malloc_tuning.h"
 #include "softshell/service/service.h"
 #include "softshell/wire.h"
 #include "test_meshes.h"
@@ -49,8 +48,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "usage: bench_soak [requests > 0] [clients > 0]\n");
     return 2;
   }
-  // As softshell-server runs (softshell/malloc_tuning.h), unless asked for glibc's defaults.
-  if (std::getenv("SOFTSHELL_BENCH_DEFAULT_MALLOC") == nullptr) tune_malloc_for_solves();
+  bench::malloc_as_the_server();
   service::ServiceOptions options;  // the server's defaults: retention keeps the newest 1,000
   auto svc = std::make_shared<service::Service>(options);
   http::HttpServer server(svc);

@@ -1,11 +1,16 @@
 #pragma once
-// Small helpers shared by the benchmarks: timing, statistics, machine description.
+// Small helpers shared by the benchmarks: timing, statistics, machine description, malloc.
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <fstream>
 #include <string>
 #include <thread>
 #include <vector>
+
+#include <sys/resource.h>
+
+#include "softshell/malloc_tuning.h"
 
 namespace softshell::bench {
 
@@ -32,6 +37,19 @@ inline std::string machine() {
     }
   }
   return model + ", " + std::to_string(std::thread::hardware_concurrency()) + " threads";
+}
+
+/// Pages faulted in so far (on a VM each fresh page costs microseconds: docs/benchmarks.md).
+inline long minor_faults() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_minflt;
+}
+
+/// malloc as softshell-server sets it (tune_malloc_for_solves), unless the environment has
+/// SOFTSHELL_BENCH_DEFAULT_MALLOC (glibc's defaults). Call first thing in main.
+inline void malloc_as_the_server() {
+  if (std::getenv("SOFTSHELL_BENCH_DEFAULT_MALLOC") == nullptr) tune_malloc_for_solves();
 }
 
 }  // namespace softshell::bench
