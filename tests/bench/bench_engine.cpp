@@ -29,6 +29,7 @@
 #include <map>
 #include <random>
 
+#include "bench_drag.h"
 #include "bench_support.h"
 #include "shell_benchmarks.h"
 #include "softshell/engine/nonlinear_solver.h"
@@ -43,7 +44,7 @@ using namespace softshell;
 
 namespace {
 
-const Material kMaterial{6.9e10, 0.32, 0.002, 2700.0};
+using bench::kMaterial;
 
 int count_extraordinary_vertices(const ControlMesh& mesh) {
   std::vector<int> valence(static_cast<size_t>(mesh.num_vertices()), 0);
@@ -165,29 +166,18 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   DragMeasurement result;
   result.dofs = 3 * mesh.num_vertices();
   result.steps = steps;
-  const double scale = 1.0 / mesh.bounding_diagonal();
-  for (Vec3& p : mesh.positions()) p *= scale;
-  auto model = engine::ShellModel::build(mesh, kMaterial);
-  if (!model.ok()) {
-    result.error = model.error().message;
+  auto drag = bench::setup_drag(std::move(mesh));
+  if (!drag.ok()) {
+    result.error = drag.error().message;
     return result;
   }
-  result.points = static_cast<int>((*model)->quadrature().size());
-  const LimitEvaluator& limit = (*model)->evaluator();
-  const SurfacePoint grab = test::topmost_face_centre(limit);
-  Vec3 low = mesh.positions()[0], high = low;
-  for (const Vec3& p : mesh.positions()) {
-    low = low.cwiseMin(p);
-    high = high.cwiseMax(p);
-  }
-  const Vec3 direction = (high - low).x() < (high - low).z() ? Vec3(1, 0, 0) : Vec3(0, 0, 1);
+  const auto& model = drag->model;
+  result.points = static_cast<int>(model->quadrature().size());
   auto cache = std::make_shared<engine::FactorCache>();
   engine::NonlinearOptions options;
   options.approximate_directions = std::getenv("SOFTSHELL_BENCH_EXACT_DIRECTIONS") == nullptr;
-  engine::NonlinearSolver solver(*model, cache, options);
-  DeformationRequest request;
-  request.vertex_constraints = test::bottom_supports(mesh, (*model)->component_of());
-  request.limit_constraints.push_back({grab, Vec3::Zero(), {}, {}});
+  engine::NonlinearSolver solver(model, cache, options);
+  DeformationRequest request = drag->request;
   auto t0 = bench::Clock::now();
   auto first = solver.solve(request);
   result.first_ms = bench::ms_since(t0);
@@ -199,7 +189,7 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   std::vector<double> times, cpu_times;
   double evaluate = 0.0, krylov = 0.0, tangent = 0.0, total = 0.0;
   for (int k = 1; k <= steps; ++k) {
-    request.limit_constraints[0].displacement = (0.3 * k / steps) * direction;
+    request.limit_constraints[0].displacement = drag->grab_at(k, steps);
     t0 = bench::Clock::now();
     const double cpu0 = cpu_ms();
     const long faults0 = bench::minor_faults();
@@ -260,7 +250,7 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   result.one_shot_iterations = one->stats.iterations;
   result.one_shot_load_steps = one->stats.load_steps;
   result.one_shot_difference = (one->displacement - u).norm() / u.norm();
-  auto linear = engine::Solver(*model, cache).solve(request);
+  auto linear = engine::Solver(model, cache).solve(request);
   if (linear.ok()) result.linear_off = (linear->displacement - u).norm() / u.norm();
   return result;
 }

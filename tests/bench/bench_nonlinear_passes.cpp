@@ -3,8 +3,8 @@
 // 10-20% with the host's load and follow the solver's path; a pass is a fixed amount of work, so
 // a change to the kernels is judged here, interleaved with the build before it.
 //
-// Setup as bench_engine's drag (same material, supports and grab); the state is the answer after
-// `bent` of its 20 steps, so the frames and stresses are those of a bent shell.
+// bench_engine's drag (bench_drag.h); the state is the answer after `bent` of its 20 steps, so the
+// frames and stresses are those of a bent shell.
 //
 // Usage: bench_nonlinear_passes [mesh = catmark_righthanded.obj] [rounds = 3] [bent = 10]
 // Each round prints the median and 90th percentile of every pass, on all threads, then on one.
@@ -14,18 +14,15 @@
 #include <string>
 #include <vector>
 
+#include "bench_drag.h"
 #include "bench_support.h"
 #include "nonlinear_shell.h"
-#include "shell_benchmarks.h"
 #include "softshell/engine/nonlinear_solver.h"
-#include "softshell/engine/shell_model.h"
 #include "test_meshes.h"
 
 using namespace softshell;
 
 namespace {
-
-const Material kMaterial{6.9e10, 0.32, 0.002, 2700.0};  // as bench_engine
 
 struct Timing {
   double p50 = 0.0, p90 = 0.0;
@@ -53,30 +50,19 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "usage: bench_nonlinear_passes [mesh] [rounds >= 1] [bent steps 0..20]\n");
     return 2;
   }
-  ControlMesh mesh = test::load_asset_mesh(name);
-  const double scale = 1.0 / mesh.bounding_diagonal();
-  for (Vec3& p : mesh.positions()) p *= scale;
-  auto built = engine::ShellModel::build(mesh, kMaterial);
-  if (!built.ok()) {
-    std::fprintf(stderr, "%s: %s\n", name.c_str(), built.error().message.c_str());
+  auto drag = bench::setup_drag(test::load_asset_mesh(name));
+  if (!drag.ok()) {
+    std::fprintf(stderr, "%s: %s\n", name.c_str(), drag.error().message.c_str());
     return 1;
   }
-  const auto model = *built;
+  const auto& model = drag->model;
 
   // The drag's state after `bent` steps.
-  Vec3 low = mesh.positions()[0], high = low;
-  for (const Vec3& p : mesh.positions()) {
-    low = low.cwiseMin(p);
-    high = high.cwiseMax(p);
-  }
-  const Vec3 direction = (high - low).x() < (high - low).z() ? Vec3(1, 0, 0) : Vec3(0, 0, 1);
   engine::NonlinearSolver solver(model, std::make_shared<engine::FactorCache>(), {});
-  DeformationRequest request;
-  request.vertex_constraints = test::bottom_supports(mesh, model->component_of());
-  request.limit_constraints.push_back({test::topmost_face_centre(model->evaluator()), Vec3::Zero(), {}, {}});
+  DeformationRequest request = drag->request;
   Eigen::VectorXd u = Eigen::VectorXd::Zero(model->num_dofs());
   for (int k = 1; k <= bent; ++k) {
-    request.limit_constraints[0].displacement = (0.3 * k / 20.0) * direction;
+    request.limit_constraints[0].displacement = drag->grab_at(k, 20);
     auto step = solver.solve(request, u);
     if (!step.ok()) {
       std::fprintf(stderr, "drag step %d: %s\n", k, step.error().message.c_str());

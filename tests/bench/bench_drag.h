@@ -1,0 +1,46 @@
+#pragma once
+// Issue 16's drag, set up once for the benchmarks that measure it (bench_engine's nonlinear table,
+// bench_nonlinear_passes): the mesh scaled to a 1 m bounding diagonal, the lowest 5% of the control
+// points held, a grab (limit constraint) at the centre of the topmost face, dragged across the
+// object's thinnest horizontal extent (out of the plane of a flat object) to 30% of its size.
+
+#include <memory>
+
+#include "shell_benchmarks.h"
+#include "softshell/deformation.h"
+#include "softshell/engine/shell_model.h"
+#include "softshell/material.h"
+
+namespace softshell::bench {
+
+/// The benchmarks' aluminium-like material: E = 6.9e10 Pa, nu = 0.32, t = 2 mm.
+inline const Material kMaterial{6.9e10, 0.32, 0.002, 2700.0};
+
+struct Drag {
+  std::shared_ptr<const engine::ShellModel> model;
+  DeformationRequest request;  ///< the supports and the grab, not yet moved
+  Vec3 direction = Vec3::UnitX();
+
+  /// The grab's displacement after step `k` of `steps`.
+  Vec3 grab_at(int k, int steps) const { return (0.3 * k / steps) * direction; }
+};
+
+inline Result<Drag> setup_drag(ControlMesh mesh) {
+  const double scale = 1.0 / mesh.bounding_diagonal();
+  for (Vec3& p : mesh.positions()) p *= scale;
+  auto model = engine::ShellModel::build(mesh, kMaterial);
+  if (!model.ok()) return model.error();
+  Drag drag;
+  drag.model = *model;
+  Vec3 low = mesh.positions()[0], high = low;
+  for (const Vec3& p : mesh.positions()) {
+    low = low.cwiseMin(p);
+    high = high.cwiseMax(p);
+  }
+  drag.direction = (high - low).x() < (high - low).z() ? Vec3(1, 0, 0) : Vec3(0, 0, 1);
+  drag.request.vertex_constraints = test::bottom_supports(mesh, drag.model->component_of());
+  drag.request.limit_constraints.push_back({test::topmost_face_centre(drag.model->evaluator()), Vec3::Zero(), {}, {}});
+  return drag;
+}
+
+}  // namespace softshell::bench
