@@ -480,9 +480,15 @@ void Run::refresh_tangent() {
     if (try_factor()) penalty_level_ = level;
   }
   indefinite_ = !factor;  // even with the constraint penalty: the tangent itself is not definite
+  // The shift goes in place, value by value: every tangent is assembled on K's pattern (a new
+  // sparse matrix per shift was a fresh mapping for spot_quadrangulated's, page faults included).
+  const Eigen::SparseMatrix<double>& k = model_->stiffness();
+  if (matrix->nonZeros() != k.nonZeros()) fail(ErrorCode::kInternal, "a tangent is not on the pattern of K");
   for (double shift : {1e-4, 1e-2, 1.0}) {
     if (factor) break;
-    *matrix += shift * model_->stiffness();
+    double* values = matrix->valuePtr();
+    const double* k_values = k.valuePtr();
+    for (Eigen::Index i = 0; i < k.nonZeros(); ++i) values[i] += shift * k_values[i];
     try_factor();
   }
   if (factor) {
