@@ -1,6 +1,6 @@
 // Issue 16's drag along several paths: the grab of bench_drag.h pulled in `paths` horizontal
-// directions spread around the vertical axis, in `steps` steps each, with what the solver did for each
-// step. Where the shell buckles under the grab (spot_quadrangulated), any change to the solver,
+// directions spread around the vertical axis, in `steps` steps each, with what the solver did for
+// each step. Where the shell buckles under the grab (spot_quadrangulated), any change to the solver,
 // even one that changes only round-off, sends a drag down another path (other iterations, other
 // refactorizations, sometimes a refusal), so a change is judged on the sum over several paths,
 // never on one drag (docs/benchmarks.md, "Nonlinear model"). One build repeats its paths (the
