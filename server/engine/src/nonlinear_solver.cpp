@@ -603,6 +603,11 @@ bool Run::solve_step(double lambda, double tolerance) {
   // step's answer says little about how good the approximation is near this one's. (Set before
   // the step's first evaluation, which then leaves out the per-point data.)
   start_approximate();
+  // The last load step's Krylov counts judged the factor at that step's states; this one judges
+  // it by its own first solve (from rest on catmark_righthanded: 4 refreshes instead of 5, the
+  // same iterations).
+  last_krylov_ = 0;
+  excess_krylov_ms_ = 0.0;
   if (state_.displacement.size() != u_.size() || state_.displacement != u_) {
     if (!evaluate(u_, state_)) return false;
     fresh_ = false;
