@@ -17,6 +17,8 @@
 
 #include "cholesky_factor.h"
 #include "factorization.h"
+#include "softshell/executor.h"
+#include "supernodal_sweeps.h"
 
 namespace softshell::engine::internal {
 namespace {
@@ -246,6 +248,102 @@ TEST(CholeskyFactor, RefactorsIntoAFactorLetGo) {
     expect_solves(*again, stiffer, "refactored after a failure");
   }
   expect_solves(*first, a, "the first factor, untouched");
+}
+
+// Whole sweeps on two threads (supernodal_sweeps.h): the same solves as on one, to round-off, for
+// one and several right-hand sides, with a dense and a local right-hand side, and on an executor
+// of one thread (which sweeps alone). Any factor size is planned here; the default leaves factors
+// under 8 MB to one thread.
+TEST(CholeskyFactor, SweepsOnTwoThreadsSolveAsOnOne) {
+  struct PlanAnySize {
+    int64_t before = g_two_thread_sweep_entries.exchange(0);
+    ~PlanAnySize() { g_two_thread_sweep_entries.store(before); }
+  } plan_any_size;
+  Eigen::Matrix3d block;
+  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const Sparse a = with_blocks(grid_laplacian(40, 36, 0.05), block);  // supernodal in both backends
+  const auto f = factor_of(a);
+  ASSERT_TRUE(f);
+  ASSERT_TRUE(f->two_thread_sweeps()) << "a grid's elimination tree splits into two halves";
+  ThreadPool pool(2);
+  InlineExecutor alone;
+  const Eigen::SimplicialLLT<Sparse> reference(a);
+  ASSERT_EQ(reference.info(), Eigen::Success);
+  for (Eigen::Index cols : {1, 3}) {
+    SCOPED_TRACE(cols);
+    const Eigen::MatrixXd b = random_rhs(a.rows(), cols, 13u + static_cast<unsigned>(cols));
+    double fraction = 0.0;
+    const Eigen::MatrixXd y1 = f->forward(b), y2 = f->forward(b, &fraction, &pool);
+    EXPECT_EQ(fraction, 1.0);
+    EXPECT_LT(relative_error(y2, y1), 1e-13);
+    const Eigen::MatrixXd x2 = f->backward(y2, &pool);
+    EXPECT_LT(relative_error(x2, f->backward(y1)), 1e-13);
+    EXPECT_LT(relative_error(x2, reference.solve(b)), 1e-11);
+    EXPECT_LT(relative_error(f->backward(f->forward(b, nullptr, &alone), &alone), reference.solve(b)), 1e-11);
+    // Many solves at once on the pool's threads (the service's case): each its own answer.
+    std::vector<Eigen::MatrixXd> answers(6);
+    pool.parallel_for(0, 6, [&](int64_t i) {
+      answers[static_cast<size_t>(i)] = f->backward(f->forward((1.0 + static_cast<double>(i)) * b, nullptr, &pool), &pool);
+    });
+    for (size_t i = 0; i < answers.size(); ++i) {
+      EXPECT_LT(relative_error(answers[i], (1.0 + static_cast<double>(i)) * x2), 1e-13) << "solve " << i;
+    }
+  }
+  // A local right-hand side still sweeps only its part of the factor (here on two threads too: any
+  // sweep is planned).
+  Eigen::MatrixXd local = Eigen::MatrixXd::Zero(a.rows(), 1);
+  local(3 * 17 + 1, 0) = 1.0;
+  double fraction = 1.0;
+  const Eigen::MatrixXd y = f->forward(local, &fraction, &pool);
+  EXPECT_LT(fraction, 0.5);
+  EXPECT_LT(relative_error(f->backward(y, &pool), reference.solve(local)), 1e-11);
+}
+
+// A factor's layout by hand, one column per supernode: column k's rows below it are `below[k]`.
+struct HandLayout {
+  std::vector<int32_t> first, rows, supernode_of;
+  std::vector<int64_t> row_start{0}, value_start{0};
+  std::vector<double> values;
+  explicit HandLayout(const std::vector<std::vector<int32_t>>& below) {
+    for (size_t k = 0; k < below.size(); ++k) {
+      first.push_back(static_cast<int32_t>(k));
+      supernode_of.push_back(static_cast<int32_t>(k));
+      rows.push_back(static_cast<int32_t>(k));
+      rows.insert(rows.end(), below[k].begin(), below[k].end());
+      row_start.push_back(static_cast<int64_t>(rows.size()));
+      value_start.push_back(value_start.back() + static_cast<int64_t>(below[k].size() + 1));
+    }
+    first.push_back(static_cast<int32_t>(below.size()));
+    values.assign(static_cast<size_t>(value_start.back()), 1.0);
+  }
+  SupernodalLayout view() const {
+    return {static_cast<int64_t>(first.size()) - 1, first.data(), row_start.data(), value_start.data(),
+            rows.data(), supernode_of.data(), values.data()};
+  }
+};
+
+// The plan: two halves of whole subtrees and a small top where the tree branches; none for a
+// chain (every split would move it all to the top) or a factor below the size threshold.
+TEST(CholeskyFactor, TwoThreadPlanNeedsATreeThatSplits) {
+  struct PlanAnySize {
+    int64_t before = g_two_thread_sweep_entries.exchange(0);
+    ~PlanAnySize() { g_two_thread_sweep_entries.store(before); }
+  } plan_any_size;
+  // Two chains of 50 columns joined by a root: 0..49 -> 100, 50..99 -> 100.
+  std::vector<std::vector<int32_t>> branches(101);
+  for (int32_t k = 0; k < 100; ++k) branches[static_cast<size_t>(k)] = {k % 50 == 49 ? 100 : k + 1, 100};
+  branches[49] = {100};
+  branches[99] = {100};
+  const HandLayout two(branches);
+  const auto plan = TwoThreadSweeps::plan(two.view());
+  ASSERT_TRUE(plan);
+  EXPECT_LT(plan->top_share(), 0.01);  // the root alone
+  std::vector<std::vector<int32_t>> line(100);
+  for (int32_t k = 0; k + 1 < 100; ++k) line[static_cast<size_t>(k)] = {k + 1};
+  const HandLayout chain(line);
+  EXPECT_FALSE(TwoThreadSweeps::plan(chain.view()));
+  g_two_thread_sweep_entries.store(two.view().entries() + 1);
+  EXPECT_FALSE(TwoThreadSweeps::plan(two.view())) << "below the threshold";
 }
 
 // Expects factorize() to refuse `a`, name a column in range and say whether A held non-finite

@@ -1,6 +1,7 @@
 // The CHOLMOD implementation of CholeskyFactor (SOFTSHELL_SPARSE_CHOLESKY=cholmod): CHOLMOD's
-// supernodal factor (simplicial when CHOLMOD finds that faster), its BLAS-based solves, and a
-// forward sweep of our own over the supernodes local right-hand sides reach.
+// supernodal factor (simplicial when CHOLMOD finds that faster), its BLAS-based solves, and
+// sweeps of our own (supernodal_sweeps.h): forward over the supernodes local right-hand sides
+// reach, and whole sweeps on two threads over a large factor.
 #include "cholesky_factor.h"
 
 #include <atomic>
@@ -17,6 +18,7 @@
 #include <dlfcn.h>
 
 #include "softshell/result.h"
+#include "supernodal_sweeps.h"
 
 namespace softshell::engine::internal {
 
@@ -207,17 +209,23 @@ Eigen::Index first_nonfinite_pivot(const cholmod_factor* l) {
 
 struct CholeskyFactor::State {
   cholmod_factor* l = nullptr;
-  uint64_t analysis = 0;              // which analysis l is of (SpareFactors)
-  std::vector<int32_t> supernode_of;  // per factor column, for a supernodal factor
+  uint64_t analysis = 0;  // which analysis l is of (SpareFactors)
+  // A supernodal factor's layout (CHOLMOD's int offsets widened), and its two-thread plan.
+  std::vector<int32_t> supernode_of;  // per factor column
+  std::vector<int64_t> row_start, value_start;
+  SupernodalLayout layout;
+  std::unique_ptr<const TwoThreadSweeps> sweeps;
   ~State() {
     if (l) g_spare_factors.keep(analysis, l);
   }
+  bool two_threads(const Executor* executor) const { return sweeps && executor && executor->concurrency() > 1; }
 
   // Runs CHOLMOD's solve of `system` (CHOLMOD_L, _Lt, _P, _Pt, _A) on a block of right-hand sides.
   Eigen::MatrixXd apply(int system, const Eigen::MatrixXd& rhs) const;
-  // The forward sweep over the supernodes reachable from the nonzero rows of P B, if that is at
-  // most half of the factor; false (and `x` untouched) otherwise.
-  bool sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read) const;
+  // The forward sweep over the supernodes reachable from the nonzero rows of P B (plan_forward),
+  // unless that is most of the factor and one thread sweeps it: false (and `x` untouched), for
+  // CHOLMOD's sweep is faster on one.
+  bool own_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read, Executor* executor) const;
 };
 
 CholeskyFactor::CholeskyFactor(std::unique_ptr<State> state) : state_(std::move(state)) {}
@@ -286,12 +294,25 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
   auto state = std::make_unique<State>();
   state->l = l;
   state->analysis = analysis;
-  if (l->is_super) {
+  if (l->is_super && l->xtype == CHOLMOD_REAL && l->dtype == CHOLMOD_DOUBLE) {
     const auto* super = static_cast<const int*>(l->super);
+    const auto* pi = static_cast<const int*>(l->pi);
+    const auto* px = static_cast<const int*>(l->px);
     state->supernode_of.resize(l->n);
     for (size_t s = 0; s < l->nsuper; ++s) {
       for (int col = super[s]; col < super[s + 1]; ++col) state->supernode_of[static_cast<size_t>(col)] = static_cast<int32_t>(s);
     }
+    state->row_start.assign(pi, pi + l->nsuper + 1);
+    state->value_start.assign(px, px + l->nsuper + 1);
+    SupernodalLayout& layout = state->layout;
+    layout.supernodes = static_cast<int64_t>(l->nsuper);
+    layout.first = super;
+    layout.row_start = state->row_start.data();
+    layout.value_start = state->value_start.data();
+    layout.rows = static_cast<const int*>(l->s);
+    layout.supernode_of = state->supernode_of.data();
+    layout.values = static_cast<const double*>(l->x);
+    state->sweeps = TwoThreadSweeps::plan(layout);
   }
   return std::unique_ptr<CholeskyFactor>(new CholeskyFactor(std::move(state)));
 }
@@ -303,6 +324,8 @@ size_t CholeskyFactor::bytes() const {
   const size_t int_size = sizeof(int);
   size_t bytes = l->is_super ? l->xsize * sizeof(double) + l->ssize * int_size + (3 * l->nsuper + 3) * int_size
                              : l->nzmax * (sizeof(double) + int_size);
+  bytes += (state_->row_start.size() + state_->value_start.size()) * sizeof(int64_t);
+  if (state_->sweeps) bytes += state_->sweeps->bytes();
   return bytes + 4 * l->n * int_size + state_->supernode_of.size() * sizeof(int32_t);
 }
 
@@ -340,63 +363,65 @@ Eigen::MatrixXd CholeskyFactor::State::apply(int system, const Eigen::MatrixXd& 
   return out;
 }
 
-bool CholeskyFactor::State::sparse_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read) const {
-  if (!l || !l->is_super || l->xtype != CHOLMOD_REAL || l->dtype != CHOLMOD_DOUBLE || rhs.cols() == 0) return false;
-  const auto* super = static_cast<const int*>(l->super);
-  const auto* pi = static_cast<const int*>(l->pi);
-  const auto* px = static_cast<const int*>(l->px);
-  const auto* rows = static_cast<const int*>(l->s);
+bool CholeskyFactor::State::own_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read,
+                                       Executor* executor) const {
+  if (layout.supernodes == 0 || rhs.cols() == 0) return false;
   const auto* perm = static_cast<const int*>(l->Perm);
-  const auto* values = static_cast<const double*>(l->x);
   const auto n = static_cast<Eigen::Index>(l->n);
-  const size_t nsuper = l->nsuper;
-
   // Which supernodes the sweep reaches: those holding a nonzero row of P B, and every supernode
-  // that one of them updates (its off-diagonal rows), in ascending order (parents come later).
-  std::vector<char> reached(nsuper, 0);
+  // that one of them updates.
+  std::vector<char> reached(static_cast<size_t>(layout.supernodes), 0);
   for (Eigen::Index k = 0; k < n; ++k) {
     if (!rhs.row(perm ? perm[k] : k).isZero(0.0)) reached[static_cast<size_t>(supernode_of[static_cast<size_t>(k)])] = 1;
   }
-  size_t work = 0;
-  for (size_t s = 0; s < nsuper; ++s) {
-    if (!reached[s]) continue;
-    const int ncols = super[s + 1] - super[s];
-    work += static_cast<size_t>(pi[s + 1] - pi[s]) * static_cast<size_t>(ncols);
-    if (2 * work > l->xsize) return false;  // most of the factor: CHOLMOD's BLAS sweep is faster
-    for (int p = pi[s] + ncols; p < pi[s + 1]; ++p) reached[static_cast<size_t>(supernode_of[static_cast<size_t>(rows[p])])] = 1;
-  }
-
+  const ForwardSweep plan = plan_forward(layout, sweeps.get(), executor, reached);
+  if (plan.whole && !plan.two_threads) return false;
   x.resize(n, rhs.cols());
   for (Eigen::Index k = 0; k < n; ++k) x.row(k) = rhs.row(perm ? perm[k] : k);
-  Eigen::MatrixXd update;
-  for (size_t s = 0; s < nsuper; ++s) {
-    if (!reached[s]) continue;
-    // Supernode s: columns k1..k1+ncols-1, a column-major nrows x ncols block whose top square is
-    // the lower-triangular diagonal block and whose other rows are listed in `rows`.
-    const int k1 = super[s], ncols = super[s + 1] - k1, nrows = pi[s + 1] - pi[s];
-    const Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> block(values + px[s], nrows, ncols,
-                                                                            Eigen::OuterStride<>(nrows));
-    auto xs = x.middleRows(k1, ncols);
-    if (xs.size() == 0) continue;  // no right-hand sides (an empty triangular solve is UB in Eigen)
-    block.topRows(ncols).triangularView<Eigen::Lower>().solveInPlace(xs);
-    if (nrows == ncols) continue;
-    update.noalias() = block.bottomRows(nrows - ncols) * xs;
-    for (int i = 0; i < nrows - ncols; ++i) x.row(rows[pi[s] + ncols + i]) -= update.row(i);
+  if (plan.two_threads) {
+    const std::vector<char>* only = plan.whole ? nullptr : &reached;
+    if (x.cols() == 1) {  // Eigen's vector kernels
+      Eigen::VectorXd v = x.col(0);
+      sweeps->forward(layout, v, *executor, only);
+      x.col(0) = v;
+    } else {
+      sweeps->forward(layout, x, *executor, only);
+    }
+    fraction_read = plan.whole ? 1.0 : static_cast<double>(plan.work) / static_cast<double>(layout.entries());
+    return true;
   }
-  fraction_read = static_cast<double>(work) / static_cast<double>(l->xsize);
+  for (int64_t s = 0; s < layout.supernodes; ++s) {
+    if (reached[static_cast<size_t>(s)]) forward_step(layout, s, x);
+  }
+  fraction_read = static_cast<double>(plan.work) / static_cast<double>(layout.entries());
   return true;
 }
 
-Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* fraction_read) const {
+Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* fraction_read, Executor* executor) const {
   Eigen::MatrixXd x;
   double fraction = 1.0;
-  if (!state_->sparse_forward(rhs, x, fraction)) x = state_->apply(CHOLMOD_L, state_->apply(CHOLMOD_P, rhs));
+  if (!state_->own_forward(rhs, x, fraction, executor)) x = state_->apply(CHOLMOD_L, state_->apply(CHOLMOD_P, rhs));
   if (fraction_read) *fraction_read = fraction;
   return x;
 }
 
-Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y) const {
-  return state_->apply(CHOLMOD_Pt, state_->apply(CHOLMOD_Lt, y));
+Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* executor) const {
+  if (!state_->two_threads(executor) || y.cols() == 0) return state_->apply(CHOLMOD_Pt, state_->apply(CHOLMOD_Lt, y));
+  Eigen::MatrixXd x = y;
+  if (x.cols() == 1) {  // Eigen's vector kernels
+    Eigen::VectorXd v = x.col(0);
+    state_->sweeps->backward(state_->layout, v, *executor);
+    x.col(0) = v;
+  } else {
+    state_->sweeps->backward(state_->layout, x, *executor);
+  }
+  const auto* perm = static_cast<const int*>(state_->l->Perm);
+  if (!perm) return x;
+  Eigen::MatrixXd out(x.rows(), x.cols());
+  for (Eigen::Index k = 0; k < x.rows(); ++k) out.row(perm[k]) = x.row(k);
+  return out;
 }
+
+bool CholeskyFactor::two_thread_sweeps() const { return state_->sweeps != nullptr; }
 
 }  // namespace softshell::engine::internal

@@ -9,9 +9,10 @@
 // dense matrix products. The method is the classical one (Liu's elimination tree, supernodes with
 // relaxed amalgamation, left-looking updates from descendant supernodes), as in Ng & Peyton 1993
 // and Davis's CHOLMOD; the code is ours. The layout of L is CHOLMOD's supernodal one (per
-// supernode a dense column-major block: its columns' rows, diagonal block first).
+// supernode a dense column-major block: its columns' rows, diagonal block first), so the sweeps
+// are the ones both backends share (supernodal_sweeps.h).
 //
-// File length: ~510 lines, one algorithm (symbolic analysis, numeric factorization, two sweeps).
+// File length: ~510 lines, one algorithm (symbolic analysis, numeric factorization).
 #ifndef EIGEN_MPL2_ONLY
 #define EIGEN_MPL2_ONLY
 #endif
@@ -25,6 +26,8 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/OrderingMethods>
+
+#include "supernodal_sweeps.h"
 
 namespace softshell::engine::internal {
 
@@ -53,13 +56,26 @@ struct Symbolic {
   std::vector<int32_t> first, supernode_of, rows;
   std::vector<int64_t> row_start, value_start;
   size_t max_update = 0;  // largest update block a descendant makes (rows x columns)
+  std::unique_ptr<const TwoThreadSweeps> sweeps;  // the plan for sweeps on two threads, if any
 
   size_t supernodes() const { return first.size() - 1; }
   size_t bytes() const {
     return (position.size() + original.size() + first.size() + supernode_of.size() + rows.size()) * sizeof(int32_t) +
-           (row_start.size() + value_start.size()) * sizeof(int64_t) + sizeof(Symbolic);
+           (row_start.size() + value_start.size()) * sizeof(int64_t) + sizeof(Symbolic) + (sweeps ? sweeps->bytes() : 0);
   }
 };
+
+SupernodalLayout layout(const Symbolic& s, const double* values) {
+  SupernodalLayout l;
+  l.supernodes = static_cast<int64_t>(s.supernodes());
+  l.first = s.first.data();
+  l.row_start = s.row_start.data();
+  l.value_start = s.value_start.data();
+  l.rows = s.rows.data();
+  l.supernode_of = s.supernode_of.data();
+  l.values = values;
+  return l;
+}
 
 // Postorder of a forest given by `parent` (-1: a root): children before their parent, each
 // subtree contiguous.
@@ -308,6 +324,7 @@ std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper
     }
   }
   s->rows.shrink_to_fit();
+  s->sweeps = TwoThreadSweeps::plan(layout(*s, nullptr));
   return s;
 }
 
@@ -424,90 +441,65 @@ size_t CholeskyFactor::bytes() const {
 
 double CholeskyFactor::min_pivot() const { return state_->min_pivot; }
 
-namespace {
+bool CholeskyFactor::two_thread_sweeps() const { return state_->symbolic->sweeps != nullptr; }
 
-// The sweeps on x in the factor's numbering, for X = VectorXd (one right-hand side: Eigen takes
-// its matrix-vector kernels) or MatrixXd.
-template <typename X>
-int64_t forward_sweep(const Symbolic& s, const double* values, std::vector<char>& reached, X& x) {
-  int64_t work = 0;
-  X update;
-  for (size_t t = 0; t < s.supernodes(); ++t) {
-    if (!reached[t]) continue;
-    const int32_t k1 = s.first[t];
-    const Eigen::Index ncols = s.first[t + 1] - k1, nrows = s.row_start[t + 1] - s.row_start[t];
-    const int32_t* rows = s.rows.data() + s.row_start[t];
-    work += nrows * ncols;
-    const ConstBlock block(values + s.value_start[t], nrows, ncols, Eigen::OuterStride<>(nrows));
-    auto xs = x.middleRows(k1, ncols);
-    block.topRows(ncols).template triangularView<Eigen::Lower>().solveInPlace(xs);
-    if (nrows == ncols) continue;
-    update.noalias() = block.bottomRows(nrows - ncols) * xs;
-    for (Eigen::Index i = 0; i < nrows - ncols; ++i) {
-      x.row(rows[ncols + i]) -= update.row(i);
-      reached[static_cast<size_t>(s.supernode_of[static_cast<size_t>(rows[ncols + i])])] = 1;
-    }
-  }
-  return work;
-}
-
-template <typename X>
-void backward_sweep(const Symbolic& s, const double* values, X& x) {
-  X gathered;
-  for (size_t t = s.supernodes(); t-- > 0;) {
-    const int32_t k1 = s.first[t];
-    const Eigen::Index ncols = s.first[t + 1] - k1, nrows = s.row_start[t + 1] - s.row_start[t];
-    const int32_t* rows = s.rows.data() + s.row_start[t];
-    const ConstBlock block(values + s.value_start[t], nrows, ncols, Eigen::OuterStride<>(nrows));
-    auto xs = x.middleRows(k1, ncols);
-    if (nrows > ncols) {
-      gathered.resize(nrows - ncols, x.cols());
-      for (Eigen::Index i = 0; i < nrows - ncols; ++i) gathered.row(i) = x.row(rows[ncols + i]);
-      xs.noalias() -= block.bottomRows(nrows - ncols).transpose() * gathered;
-    }
-    block.topRows(ncols).template triangularView<Eigen::Lower>().transpose().solveInPlace(xs);
-  }
-}
-
-}  // namespace
-
-Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* fraction_read) const {
+Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* fraction_read, Executor* executor) const {
   const Symbolic& s = *state_->symbolic;
+  const SupernodalLayout l = layout(s, state_->values.data());
   // P B, and the supernodes holding its nonzero rows: the sweep starts there and reaches every
-  // supernode one of them updates (their rows below their columns), in ascending order.
+  // supernode one of them updates, in ascending order (on two threads where plan_forward says
+  // so).
   std::vector<char> reached(s.supernodes(), 0);
   for (Eigen::Index i = 0; i < s.n; ++i) {
     if (!rhs.row(i).isZero(0.0)) {
       reached[static_cast<size_t>(s.supernode_of[static_cast<size_t>(s.position[static_cast<size_t>(i)])])] = 1;
     }
   }
-  int64_t work = 0;
+  const ForwardSweep plan = plan_forward(l, s.sweeps.get(), executor, reached);
+  const int64_t total = l.entries();
+  auto sweep = [&](auto& x) {
+    if (plan.two_threads) {
+      s.sweeps->forward(l, x, *executor, plan.whole ? nullptr : &reached);
+      return;
+    }
+    for (int64_t t = 0; t < l.supernodes; ++t) {
+      if (reached[static_cast<size_t>(t)]) forward_step(l, t, x);
+    }
+  };
   Eigen::MatrixXd out(s.n, rhs.cols());
-  if (rhs.cols() == 1) {
+  if (rhs.cols() == 1) {  // Eigen's vector kernels
     Eigen::VectorXd x(s.n);
     for (Eigen::Index i = 0; i < s.n; ++i) x[s.position[static_cast<size_t>(i)]] = rhs(i, 0);
-    work = forward_sweep(s, state_->values.data(), reached, x);
+    sweep(x);
     out.col(0) = x;
-  } else {
+  } else if (rhs.cols() > 1) {
     for (Eigen::Index i = 0; i < s.n; ++i) out.row(s.position[static_cast<size_t>(i)]) = rhs.row(i);
-    work = forward_sweep(s, state_->values.data(), reached, out);
+    sweep(out);
   }
-  if (fraction_read) {
-    *fraction_read = s.value_start.back() > 0 ? static_cast<double>(work) / static_cast<double>(s.value_start.back()) : 1.0;
-  }
+  const int64_t work = plan.two_threads && plan.whole ? total : plan.work;
+  if (fraction_read) *fraction_read = total > 0 ? static_cast<double>(work) / static_cast<double>(total) : 1.0;
   return out;
 }
 
-Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y) const {
+Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* executor) const {
   const Symbolic& s = *state_->symbolic;
+  const SupernodalLayout l = layout(s, state_->values.data());
+  const bool two_threads = s.sweeps && executor && executor->concurrency() > 1;
+  auto sweep = [&](auto& x) {
+    if (two_threads) {
+      s.sweeps->backward(l, x, *executor);
+      return;
+    }
+    for (int64_t t = l.supernodes; t-- > 0;) backward_step(l, t, x);
+  };
   Eigen::MatrixXd out(y.rows(), y.cols());
   if (y.cols() == 1) {
     Eigen::VectorXd x = y.col(0);
-    backward_sweep(s, state_->values.data(), x);
+    sweep(x);
     for (Eigen::Index i = 0; i < s.n; ++i) out(i, 0) = x[s.position[static_cast<size_t>(i)]];
-  } else {
+  } else if (y.cols() > 1) {
     Eigen::MatrixXd x = y;
-    backward_sweep(s, state_->values.data(), x);
+    sweep(x);
     for (Eigen::Index i = 0; i < s.n; ++i) out.row(i) = x.row(s.position[static_cast<size_t>(i)]);
   }
   return out;

@@ -16,6 +16,8 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
+#include "softshell/executor.h"
+
 namespace softshell::engine::internal {
 
 /// CHOLMOD build: factors of at least this many bytes of values that are let go of are kept (at
@@ -46,10 +48,15 @@ class CholeskyFactor {
   Eigen::Index size() const;
   /// L^-1 P B. Right-hand sides that are local make the result sparse: it is nonzero only on the
   /// elimination-tree paths from their rows to the root, and only that part of L is read (unless
-  /// it is most of L); `fraction_read`, if given, receives the share of L read.
-  Eigen::MatrixXd forward(const Eigen::MatrixXd& rhs, double* fraction_read = nullptr) const;
-  /// P^T L^-T Y.
-  Eigen::MatrixXd backward(const Eigen::MatrixXd& y) const;
+  /// it is most of L); `fraction_read`, if given, receives the share of L read. With an executor
+  /// of two threads or more, a sweep over most of a large factor runs on two of them
+  /// (supernodal_sweeps.h).
+  Eigen::MatrixXd forward(const Eigen::MatrixXd& rhs, double* fraction_read = nullptr, Executor* executor = nullptr) const;
+  /// P^T L^-T Y (on two threads as above).
+  Eigen::MatrixXd backward(const Eigen::MatrixXd& y, Executor* executor = nullptr) const;
+  /// True if sweeps with an executor run on two threads (a large supernodal factor whose tree
+  /// splits well).
+  bool two_thread_sweeps() const;
   /// The smallest pivot, min_k L_kk^2.
   double min_pivot() const;
   /// Memory held by the factor (bytes), its symbolic part included.

@@ -53,7 +53,10 @@ Eigen::SparseMatrix<double> upper_part(const Eigen::SparseMatrix<double>& a, con
 
 Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
                              const Eigen::MatrixXd& motions)
-    : id_(g_next_factor_id++), fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
+    : id_(g_next_factor_id++), fixed_(std::move(fixed)), pinned_(std::move(pinned)),
+      executor_(model.options().threads == 1 ? nullptr
+                : model.options().executor ? model.options().executor
+                                           : default_executor()) {
   const auto start = std::chrono::steady_clock::now();
   factorize(model.stiffness(), nullptr);
   compute_pin_block(model.stiffness(), motions);
@@ -62,8 +65,8 @@ Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed
 
 Factorization::Factorization(const Eigen::SparseMatrix<double>& k, std::vector<int32_t> fixed,
                              std::vector<int32_t> pinned, const Factorization* same_pattern,
-                             const Eigen::MatrixXd& motions)
-    : id_(g_next_factor_id++), fixed_(std::move(fixed)), pinned_(std::move(pinned)) {
+                             const Eigen::MatrixXd& motions, std::shared_ptr<Executor> executor)
+    : id_(g_next_factor_id++), fixed_(std::move(fixed)), pinned_(std::move(pinned)), executor_(std::move(executor)) {
   const auto start = std::chrono::steady_clock::now();
   if (same_pattern && (same_pattern->fixed_ != fixed_ || same_pattern->pinned_ != pinned_ ||
                        same_pattern->position_.size() != static_cast<size_t>(k.rows()))) {
@@ -175,12 +178,16 @@ Factorization::~Factorization() = default;
 Eigen::MatrixXd Factorization::forward(const Eigen::MatrixXd& rhs, double* fraction_read) const {
   if (fraction_read) *fraction_read = 1.0;
   if (!factor_ || rhs.cols() == 0) return Eigen::MatrixXd::Zero(rhs.rows(), rhs.cols());
-  return factor_->forward(rhs, fraction_read);
+  return factor_->forward(rhs, fraction_read, executor_.get());
 }
 
 Eigen::MatrixXd Factorization::backward(const Eigen::MatrixXd& y) const {
   if (!factor_ || y.cols() == 0) return Eigen::MatrixXd::Zero(y.rows(), y.cols());
-  return factor_->backward(y);
+  return factor_->backward(y, executor_.get());
+}
+
+bool Factorization::two_thread_sweeps() const {
+  return factor_ && executor_ && executor_->concurrency() > 1 && factor_->two_thread_sweeps();
 }
 
 SparseCholesky::SparseCholesky(const Eigen::SparseMatrix<double>& a) {

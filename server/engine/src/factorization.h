@@ -16,6 +16,7 @@
 #include <Eigen/SparseCore>
 
 #include "softshell/engine/shell_model.h"
+#include "softshell/executor.h"
 #include "softshell/result.h"
 
 namespace softshell::engine::internal {
@@ -34,15 +35,19 @@ class Factorization {
   /// Factorizes K restricted to the DOFs neither fixed nor pinned. `motions` (3n x pins, zero on
   /// the fixed DOFs): the free zero-energy motions the pins carry (see pin_block()). Throws
   /// FactorizationFailed if that matrix is not positive definite.
+  /// Its sweeps run on the model's executor (two threads on a large factor; one if the model's
+  /// `threads` is 1).
   Factorization(const ShellModel& model, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
                 const Eigen::MatrixXd& motions);
   /// The same for another symmetric matrix with K's sparsity pattern (both triangles stored; e.g.
   /// a tangent stiffness). With `same_pattern` (a factor of a matrix with this pattern and the
   /// same fixed and pinned DOFs), its ordering and symbolic analysis are reused: only the numeric
   /// factorization runs (`reused_analysis()`); a factor that does not fit is ignored. `motions` as
-  /// above; without them (empty) the pins' block is kept as computed.
+  /// above; without them (empty) the pins' block is kept as computed. `executor`: where its sweeps
+  /// may use a second thread (none: one thread).
   Factorization(const Eigen::SparseMatrix<double>& k, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
-                const Factorization* same_pattern = nullptr, const Eigen::MatrixXd& motions = Eigen::MatrixXd());
+                const Factorization* same_pattern = nullptr, const Eigen::MatrixXd& motions = Eigen::MatrixXd(),
+                std::shared_ptr<Executor> executor = nullptr);
   ~Factorization();
   Factorization(const Factorization&) = delete;
   Factorization& operator=(const Factorization&) = delete;
@@ -58,6 +63,8 @@ class Factorization {
   int32_t pin_position(int32_t dof) const { return pin_position_[static_cast<size_t>(dof)]; }
   size_t bytes() const { return bytes_; }
   double factor_ms() const { return factor_ms_; }
+  /// True if its sweeps run on two threads (a large factor, an executor of two threads or more).
+  bool two_thread_sweeps() const;
   /// True if the symbolic analysis was taken from `same_pattern`.
   bool reused_analysis() const { return reused_analysis_; }
 
@@ -95,6 +102,7 @@ class Factorization {
   bool pin_block_zeroed_ = true;
   double pin_motion_residual_ = 0.0;
   std::unique_ptr<const CholeskyFactor> factor_;
+  std::shared_ptr<Executor> executor_;  // for the sweeps (null: one thread)
   uint64_t pattern_hash_ = 0;  // of K_aa's upper pattern: a same-pattern factor must match it
   bool reused_analysis_ = false;
   size_t bytes_ = 0;

@@ -471,7 +471,10 @@ void Run::refresh_tangent() {
   auto try_factor = [&] {
     ++stats_.factorizations;
     try {
-      factor = std::make_shared<const Factorization>(*matrix, problem_.fixed, pins_.dofs, pattern);
+      // (Its sweeps on the solve's threads: two on a large factor, unless the solve has one.)
+      factor = std::make_shared<const Factorization>(
+          *matrix, problem_.fixed, pins_.dofs, pattern, Eigen::MatrixXd(),
+          options_.threads == 1 ? nullptr : options_.executor ? options_.executor : default_executor());
       return true;
     } catch (const internal::FactorizationFailed&) {
       return false;

@@ -1,0 +1,111 @@
+#pragma once
+// The triangular sweeps of a supernodal Cholesky factor L (P A P^T = L L^T) on two threads
+// (private to the engine; both CholeskyFactor backends store their factors this way).
+//
+// A sweep with one right-hand side reads all of L once and does two flops per entry read: on a
+// large factor it runs at the speed of memory, and one core does not draw all of it. The
+// elimination tree lets two threads share a sweep: below its top separators it falls apart into
+// subtrees that touch disjoint columns. The plan splits the tree into two sets of whole subtrees
+// and the supernodes above them (the top, swept by one thread), choosing the split for the least
+// top plus larger set:
+//   forward (L^-1):  both sets at once, each in ascending order; what they subtract from the
+//                    top's rows is gathered per thread and added after; then the top.
+//   backward (L^-T): the top first, then both sets at once in descending order (they only read
+//                    the top's rows, which are final by then).
+// Every supernode does the same arithmetic as in a sweep on one thread; only the order in which
+// the two sets' updates reach the top's rows differs (round-off).
+
+#include <array>
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "softshell/executor.h"
+
+namespace softshell::engine::internal {
+
+/// A supernodal factor as both backends store it (views; the owner keeps the arrays alive).
+/// Supernode s holds columns first[s] .. first[s + 1] - 1; its rows (its own columns first, then
+/// the rows below, ascending) are rows[row_start[s] .. row_start[s + 1]); its values are a
+/// column-major block (rows x columns) at values + value_start[s].
+struct SupernodalLayout {
+  int64_t supernodes = 0;
+  const int32_t* first = nullptr;
+  const int64_t* row_start = nullptr;
+  const int64_t* value_start = nullptr;
+  const int32_t* rows = nullptr;
+  const int32_t* supernode_of = nullptr;  // per column
+  const double* values = nullptr;
+
+  int64_t columns() const { return supernodes > 0 ? first[supernodes] : 0; }
+  int64_t entries() const { return supernodes > 0 ? value_start[supernodes] : 0; }
+};
+
+/// Factors with fewer stored entries are swept on one thread (1M entries, 8 MB: about 1 ms a sweep
+/// here, where a second thread's wake-up and the top's gathering start to pay), and so are
+/// forward sweeps from local right-hand sides that reach fewer than a quarter of that. Tests
+/// lower it.
+extern std::atomic<int64_t> g_two_thread_sweep_entries;
+
+/// Marks in `reached` (one flag per supernode, the supernodes of the nonzero rows set) every
+/// supernode a forward sweep from them reaches, in ascending order, and returns the entries of L
+/// they hold; stops early, returning more than `limit`, once they hold more than `limit`.
+int64_t reach(const SupernodalLayout& l, std::vector<char>& reached, int64_t limit);
+
+class TwoThreadSweeps;
+
+/// How a forward sweep from some right-hand sides runs (both backends' rule). `reached` (one flag
+/// per supernode, those of the nonzero rows set) gets every supernode the sweep reaches.
+struct ForwardSweep {
+  int64_t work = 0;          ///< entries of L the reached supernodes hold
+  bool whole = false;        ///< more than half the factor: sweep all of it (no skipping pays)
+  bool two_threads = false;  ///< on two threads: a plan, an executor of two, and a quarter of
+                             ///< g_two_thread_sweep_entries reached or more
+};
+ForwardSweep plan_forward(const SupernodalLayout& l, const TwoThreadSweeps* sweeps, const Executor* executor,
+                          std::vector<char>& reached);
+
+class TwoThreadSweeps {
+ public:
+  /// The plan for `l`'s tree; null if the factor is below g_two_thread_sweep_entries or no split
+  /// of its tree (a top of at most half the factor) would make a sweep 10% faster.
+  static std::unique_ptr<const TwoThreadSweeps> plan(const SupernodalLayout& l);
+
+  /// x (n x k, rows in factor order) := L^-1 x, on at most two of the executor's threads (the
+  /// calling one included). `reached`, if given: the supernodes the sweep reaches from x's nonzero
+  /// rows (reach()); the others are skipped.
+  template <class X>
+  void forward(const SupernodalLayout& l, X& x, Executor& executor, const std::vector<char>* reached = nullptr) const;
+  /// x := L^-T x.
+  template <class X>
+  void backward(const SupernodalLayout& l, X& x, Executor& executor) const;
+
+  /// The share of the factor's entries in the top (what one thread sweeps alone).
+  double top_share() const { return top_share_; }
+  /// Memory held by the plan.
+  size_t bytes() const {
+    return sizeof(*this) + (halves_[0].size() + halves_[1].size() + top_.size() + top_rows_.size() + top_index_.size()) *
+                               sizeof(int32_t);
+  }
+
+ private:
+  TwoThreadSweeps() = default;
+  std::array<std::vector<int32_t>, 2> halves_;  // supernodes, ascending
+  std::vector<int32_t> top_;                    // supernodes, ascending
+  std::vector<int32_t> top_rows_;               // the top's columns, ascending
+  std::vector<int32_t> top_index_;              // per column: its index in top_rows_, or -1
+  double top_share_ = 0.0;
+};
+
+/// One supernode's step of a sweep on one thread (the backends' own sweeps and the plan's share
+/// them, so the arithmetic is the same).
+template <class X>
+void forward_step(const SupernodalLayout& l, int64_t s, X& x);
+template <class X>
+void backward_step(const SupernodalLayout& l, int64_t s, X& x);
+
+}  // namespace softshell::engine::internal
