@@ -111,18 +111,18 @@ std::unique_ptr<const TwoThreadSweeps> TwoThreadSweeps::plan(const SupernodalLay
   // least top plus larger half (a sweep reads memory at about the same rate on each thread). Stop
   // when the top would hold half the factor.
   std::vector<int32_t> top;
-  std::vector<std::pair<int32_t, char>> best_halves;  // the best split's subtree roots and halves
+  std::vector<std::pair<int32_t, int8_t>> best_halves;  // the best split's subtree roots and halves
   size_t best_top = 0;
   int64_t best_time = total, top_work = 0;
   for (;;) {
     std::sort(frontier.begin(), frontier.end(),
               [&](int32_t a, int32_t b) { return subtree[static_cast<size_t>(a)] > subtree[static_cast<size_t>(b)]; });
     std::array<int64_t, 2> half{0, 0};
-    std::vector<std::pair<int32_t, char>> halves;
+    std::vector<std::pair<int32_t, int8_t>> halves;
     for (int32_t root : frontier) {
       const int h = half[0] <= half[1] ? 0 : 1;
       half[static_cast<size_t>(h)] += subtree[static_cast<size_t>(root)];
-      halves.emplace_back(root, static_cast<char>(h));
+      halves.emplace_back(root, static_cast<int8_t>(h));
     }
     const int64_t time = top_work + std::max(half[0], half[1]);
     if (time < best_time) {
@@ -133,7 +133,9 @@ std::unique_ptr<const TwoThreadSweeps> TwoThreadSweeps::plan(const SupernodalLay
     const int32_t heaviest = frontier.front();
     if (children[static_cast<size_t>(heaviest)].empty()) break;
     top_work += own[static_cast<size_t>(heaviest)];
-    if (2 * top_work > total) break;
+    // No later split beats the best once the top alone makes it slower (a split takes at least
+    // top + (total - top) / 2).
+    if (2 * top_work > total || total + top_work >= 2 * best_time) break;
     top.push_back(heaviest);
     frontier.erase(frontier.begin());
     frontier.insert(frontier.end(), children[static_cast<size_t>(heaviest)].begin(),
@@ -141,12 +143,12 @@ std::unique_ptr<const TwoThreadSweeps> TwoThreadSweeps::plan(const SupernodalLay
   }
   // Worth a second thread only if the sweep gets 10% faster at least.
   if (10 * best_time > 9 * total) return nullptr;
-  std::vector<char> owner(count, -1);  // 0, 1: a half; 2: the top
+  std::vector<int8_t> owner(count, -1);  // 0, 1: a half; 2: the top
   for (size_t i = 0; i < best_top; ++i) owner[static_cast<size_t>(top[i])] = 2;
   for (const auto& [root, h] : best_halves) owner[static_cast<size_t>(root)] = h;
   // Every other supernode goes with its parent (parents first: descending order).
   for (int64_t s = ns - 1; s >= 0; --s) {
-    char& o = owner[static_cast<size_t>(s)];
+    int8_t& o = owner[static_cast<size_t>(s)];
     if (o >= 0) continue;
     const int32_t p = parent[static_cast<size_t>(s)];
     if (p < 0 || owner[static_cast<size_t>(p)] < 0 || owner[static_cast<size_t>(p)] == 2) return nullptr;
@@ -155,17 +157,17 @@ std::unique_ptr<const TwoThreadSweeps> TwoThreadSweeps::plan(const SupernodalLay
   // What the sweeps rely on: a supernode's rows below its columns are its own half's or the top's
   // (the top's: the top's only).
   for (int64_t s = 0; s < ns; ++s) {
-    const char o = owner[static_cast<size_t>(s)];
+    const int8_t o = owner[static_cast<size_t>(s)];
     const int64_t ncols = l.first[s + 1] - l.first[s];
     for (int64_t p = l.row_start[s] + ncols; p < l.row_start[s + 1]; ++p) {
-      const char r = owner[static_cast<size_t>(l.supernode_of[l.rows[p]])];
+      const int8_t r = owner[static_cast<size_t>(l.supernode_of[l.rows[p]])];
       if (r != 2 && r != o) return nullptr;
     }
   }
   std::unique_ptr<TwoThreadSweeps> plan(new TwoThreadSweeps());
   plan->top_index_.assign(static_cast<size_t>(l.columns()), -1);
   for (int64_t s = 0; s < ns; ++s) {
-    const char o = owner[static_cast<size_t>(s)];
+    const int8_t o = owner[static_cast<size_t>(s)];
     if (o < 2) {
       plan->halves_[static_cast<size_t>(o)].push_back(static_cast<int32_t>(s));
       continue;
