@@ -13,7 +13,8 @@
 //   backward (L^-T): the top first, then both sets at once in descending order (they only read
 //                    the top's rows, which are final by then).
 // Every supernode does the same arithmetic as in a sweep on one thread; only the order in which
-// the two sets' updates reach the top's rows differs (round-off).
+// the two sets' updates reach the top's rows differs (round-off). The answer does not depend on
+// which thread sweeps which set, or when: the same bits every time.
 
 #include <array>
 #include <atomic>
