@@ -6,6 +6,7 @@
 // the same reference.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -70,6 +71,27 @@ Sparse with_blocks(const Sparse& graph, const Eigen::Matrix3d& block) {
   a.setFromTriplets(t.begin(), t.end());
   return a;
 }
+
+// The 3 x 3 block the tests couple each node's DOFs with (symmetric positive definite).
+Eigen::Matrix3d node_block() {
+  Eigen::Matrix3d block;
+  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  return block;
+}
+
+// Sets one of the engine's test knobs for a scope, then puts its value back.
+template <class T>
+class ScopedKnob {
+ public:
+  ScopedKnob(std::atomic<T>& knob, T value) : knob_(knob), before_(knob.exchange(value)) {}
+  ~ScopedKnob() { knob_.store(before_); }
+  ScopedKnob(const ScopedKnob&) = delete;
+  ScopedKnob& operator=(const ScopedKnob&) = delete;
+
+ private:
+  std::atomic<T>& knob_;
+  T before_;
+};
 
 // An arrow matrix: a tridiagonal chain plus a dense last row and column (a wide root supernode).
 Sparse arrow(int n) {
@@ -171,16 +193,14 @@ TEST(CholeskyFactor, MatchesDenseLltOnSmallSpdMatrices) {
   for (int i = 0; i < 5; ++i) diagonal.insert(i, i) = 1.0 + i;
   expect_matches_dense(diagonal, "diagonal");
   expect_matches_dense(grid_laplacian(9, 7, 0.1), "grid Laplacian");
-  Eigen::Matrix3d block;
-  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const Eigen::Matrix3d block = node_block();
   expect_matches_dense(with_blocks(grid_laplacian(8, 6, 0.2), block), "3 DOFs per node (supernodes)");
   expect_matches_dense(arrow(60), "arrow (dense root)");
   expect_matches_dense(dense_spd(150, 3), "dense 150 x 150 (one supernode, blocked LLT)");
 }
 
 TEST(CholeskyFactor, LocalRightHandSideSweepsPartOfTheFactor) {
-  Eigen::Matrix3d block;
-  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const Eigen::Matrix3d block = node_block();
   const Sparse a = with_blocks(grid_laplacian(30, 30, 0.05), block);
   const auto f = factor_of(a);
   ASSERT_TRUE(f);
@@ -203,8 +223,7 @@ TEST(CholeskyFactor, LocalRightHandSideSweepsPartOfTheFactor) {
 }
 
 TEST(CholeskyFactor, ReusesTheAnalysisForAnotherMatrixOfThePattern) {
-  Eigen::Matrix3d block;
-  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const Eigen::Matrix3d block = node_block();
   const Sparse a = with_blocks(grid_laplacian(10, 8, 0.2), block);
   const Sparse a2 = with_scaled_diagonal(a, 1.5);  // same pattern, other values
   const auto first = factor_of(a);
@@ -222,12 +241,8 @@ TEST(CholeskyFactor, ReusesTheAnalysisForAnotherMatrixOfThePattern) {
 // (the CHOLMOD build keeps two large ones; here any size), also after a failed one left it: each
 // answer as from scratch.
 TEST(CholeskyFactor, RefactorsIntoAFactorLetGo) {
-  struct KeepAnySize {
-    size_t before = g_spare_factor_bytes.exchange(0);
-    ~KeepAnySize() { g_spare_factor_bytes.store(before); }
-  } keep_any_size;
-  Eigen::Matrix3d block;
-  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const ScopedKnob<size_t> keep_any_size(g_spare_factor_bytes, 0);
+  const Eigen::Matrix3d block = node_block();
   const Sparse a = with_blocks(grid_laplacian(30, 30, 0.05), block);  // large enough to be supernodal
   const Sparse stiffer = with_scaled_diagonal(a, 1.5), indefinite = with_scaled_diagonal(a, -1.0);
   const Eigen::MatrixXd b = random_rhs(a.rows(), 2, 5);
@@ -255,12 +270,8 @@ TEST(CholeskyFactor, RefactorsIntoAFactorLetGo) {
 // of one thread (which sweeps alone). Any factor size is planned here; the default leaves factors
 // under 8 MB to one thread.
 TEST(CholeskyFactor, SweepsOnTwoThreadsSolveAsOnOne) {
-  struct PlanAnySize {
-    int64_t before = g_two_thread_sweep_entries.exchange(0);
-    ~PlanAnySize() { g_two_thread_sweep_entries.store(before); }
-  } plan_any_size;
-  Eigen::Matrix3d block;
-  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const ScopedKnob<int64_t> plan_any_size(g_two_thread_sweep_entries, 0);
+  const Eigen::Matrix3d block = node_block();
   const Sparse a = with_blocks(grid_laplacian(40, 36, 0.05), block);  // supernodal in both backends
   const auto f = factor_of(a);
   ASSERT_TRUE(f);
@@ -325,10 +336,7 @@ struct HandLayout {
 // The plan: two halves of whole subtrees and a small top where the tree branches; none for a
 // chain (every split would move it all to the top) or a factor below the size threshold.
 TEST(CholeskyFactor, TwoThreadPlanNeedsATreeThatSplits) {
-  struct PlanAnySize {
-    int64_t before = g_two_thread_sweep_entries.exchange(0);
-    ~PlanAnySize() { g_two_thread_sweep_entries.store(before); }
-  } plan_any_size;
+  const ScopedKnob<int64_t> plan_any_size(g_two_thread_sweep_entries, 0);
   // Two chains of 50 columns joined by a root: 0..49 -> 100, 50..99 -> 100.
   std::vector<std::vector<int32_t>> branches(101);
   for (int32_t k = 0; k < 100; ++k) branches[static_cast<size_t>(k)] = {k % 50 == 49 ? 100 : k + 1, 100};
@@ -366,8 +374,7 @@ void expect_refused(const Sparse& a, const char* what, bool not_finite = false, 
 // matrices on both sides of that size stay exact, in either order on one thread (whose settings
 // the last factorization left), and an indefinite large matrix is still refused.
 TEST(CholeskyFactor, LargeAndSmallMatricesAreBothExact) {
-  Eigen::Matrix3d block;
-  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const Eigen::Matrix3d block = node_block();
   const Sparse large = with_blocks(grid_laplacian(48, 48, 0.05), block);  // 6,912 rows
   const Sparse small = with_blocks(grid_laplacian(10, 8, 0.2), block);
   ASSERT_GE(large.rows(), 6000);
@@ -391,8 +398,7 @@ TEST(CholeskyFactor, ReportsMatricesThatAreNotPositiveDefinite) {
   expect_refused(diagonal, "one negative diagonal entry", false, 4);
   // A grid Laplacian shifted below zero: smallest eigenvalue -0.05, every diagonal entry positive.
   expect_refused(grid_laplacian(9, 7, -0.05), "indefinite grid Laplacian");
-  Eigen::Matrix3d block;
-  block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
+  const Eigen::Matrix3d block = node_block();
   Sparse blocks = with_blocks(grid_laplacian(8, 6, 0.2), block);
   // One node's 3x3 block made indefinite (eigenvalues 3 and -1 in the first two DOFs).
   blocks.coeffRef(3 * 20, 3 * 20) = 1.0;
