@@ -56,9 +56,10 @@ struct PrecomputeOptions {
   QuadratureOptions quadrature;
   LimitEvaluator::Options evaluator;
   /// Where the per-face work runs (the host's threads); empty = softshell::default_executor().
+  /// The linear solves on the model's factors sweep large ones (8 MB or more) on two of its threads.
   std::shared_ptr<Executor> executor;
   /// At most this many of the executor's threads work on one build; 0 = all of them. The result
-  /// is bit-for-bit the same for every thread count.
+  /// is bit-for-bit the same for every thread count. 1 also keeps the solves' sweeps on one thread.
   int threads = 0;
   /// Called with the fraction done in [0, 1], from one of the worker threads. May be empty.
   std::function<void(double)> progress;
