@@ -176,6 +176,7 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   auto cache = std::make_shared<engine::FactorCache>();
   engine::NonlinearOptions options;
   options.approximate_directions = std::getenv("SOFTSHELL_BENCH_EXACT_DIRECTIONS") == nullptr;
+  if (const char* levels = std::getenv("SOFTSHELL_BENCH_EARLY_RULE_LEVELS")) options.early_rule_levels = std::atoi(levels);
   engine::NonlinearSolver solver(model, cache, options);
   DeformationRequest request = drag->request;
   auto t0 = bench::Clock::now();
@@ -204,10 +205,10 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
     times.push_back(ms);
     const engine::NonlinearStats& s = step->stats;
     if (std::getenv("SOFTSHELL_BENCH_STEPS")) {
-      std::printf("  step %d: %.1f ms, %d Newton (%d approximate, %d by differences, %d evaluations), %d Krylov, %d factors; "
+      std::printf("  step %d: %.1f ms, %d Newton (%d approximate, %d by differences, %d evaluations, %d early), %d Krylov, %d factors; "
                   "forces %.1f ms, Krylov %.1f ms, tangents %.1f ms; %ld pages faulted in\n", k, ms, s.iterations,
-                  s.approximate_iterations, s.difference_iterations, s.evaluations, s.krylov_iterations, s.factorizations,
-                  s.evaluate_ms, s.krylov_ms, s.tangent_ms, faults);
+                  s.approximate_iterations, s.difference_iterations, s.evaluations, s.early_evaluations, s.krylov_iterations,
+                  s.factorizations, s.evaluate_ms, s.krylov_ms, s.tangent_ms, faults);
       std::fflush(stdout);  // a long drag shows its progress, also into a file
     }
     result.iterations += s.iterations;
@@ -242,10 +243,11 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   }
   if (std::getenv("SOFTSHELL_BENCH_STEPS")) {
     const engine::NonlinearStats& s = one->stats;
-    std::printf("  from rest: %.1f ms, %d load steps, %d Newton (%d approximate, %d by differences, %d evaluations), "
+    std::printf("  from rest: %.1f ms, %d load steps, %d Newton (%d approximate, %d by differences, %d evaluations, %d early), "
                 "%d Krylov, %d factors; forces %.1f ms, Krylov %.1f ms, tangents %.1f ms; %ld pages faulted in\n",
                 result.one_shot_ms, s.load_steps, s.iterations, s.approximate_iterations, s.difference_iterations,
-                s.evaluations, s.krylov_iterations, s.factorizations, s.evaluate_ms, s.krylov_ms, s.tangent_ms, one_faults);
+                s.evaluations, s.early_evaluations, s.krylov_iterations, s.factorizations, s.evaluate_ms, s.krylov_ms, s.tangent_ms,
+                one_faults);
   }
   result.one_shot_iterations = one->stats.iterations;
   result.one_shot_load_steps = one->stats.load_steps;

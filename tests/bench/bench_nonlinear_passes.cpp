@@ -77,11 +77,14 @@ int main(int argc, char** argv) {
   struct Passes {
     int threads;
     std::shared_ptr<const engine::internal::NonlinearShell> shell;
-    engine::internal::ShellState state, coarse;
+    engine::internal::ShellState state, coarse, early;
   };
   std::vector<Passes> configurations;
   for (int threads : {0, 1}) {
-    Passes c{threads, engine::internal::NonlinearShell::build(model, threads, defaults.tangent_gauss_points), {}, {}};
+    Passes c{threads,
+             engine::internal::NonlinearShell::build(model, threads, defaults.tangent_gauss_points, nullptr,
+                                                     defaults.early_rule_levels),
+             {}, {}, {}};
     if (!c.shell->evaluate(u, c.state, false, true) || !c.shell->evaluate_coarse(u, c.coarse)) {
       std::fprintf(stderr, "the bent state is degenerate\n");
       return 1;
@@ -98,8 +101,8 @@ int main(int argc, char** argv) {
   std::printf("%s: %d DOFs, %zu points in the model's rule; the drag's state after %d of 20 steps\n\n", name.c_str(),
               model->num_dofs(), configurations[0].shell->num_points(), bent);
   std::printf("| round | threads | evaluate | evaluate + point data | exact tangent product | coarse evaluate | "
-              "approximate product | approximate assembly |\n");
-  std::printf("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+              "approximate product | approximate assembly | early evaluate |\n");
+  std::printf("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   auto cell = [](const Timing& t) {
     char text[64];
     std::snprintf(text, sizeof text, "%.2f (%.2f) ms", t.p50, t.p90);
@@ -114,8 +117,10 @@ int main(int argc, char** argv) {
       const Timing ec = time_pass(100, [&] { shell.evaluate_coarse(u, c.coarse); });
       const Timing ap = time_pass(100, [&] { shell.approximate_tangent_product(c.coarse, 0.0, v, out); });
       const Timing as = time_pass(20, [&] { shell.assemble_approximate_tangent(c.coarse, 0.0, matrix); });
-      std::printf("| %d | %s | %s | %s | %s | %s | %s | %s |\n", round, c.threads == 0 ? "all" : "1", cell(e).c_str(),
-                  cell(ep).c_str(), cell(tp).c_str(), cell(ec).c_str(), cell(ap).c_str(), cell(as).c_str());
+      const Timing ee = time_pass(30, [&] { shell.evaluate_early(u, c.early, false); });
+      std::printf("| %d | %s | %s | %s | %s | %s | %s | %s | %s |\n", round, c.threads == 0 ? "all" : "1",
+                  cell(e).c_str(), cell(ep).c_str(), cell(tp).c_str(), cell(ec).c_str(), cell(ap).c_str(),
+                  cell(as).c_str(), cell(ee).c_str());
     }
   }
   std::printf("\nmedian (90th percentile) of 30 passes (100 for the coarse rule's, 20 assemblies) each\n");

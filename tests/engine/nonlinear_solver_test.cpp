@@ -236,6 +236,54 @@ TEST(NonlinearSolver, EverySmallShippedMeshTakesALargePull) {
   }
 }
 
+// The early rule (NonlinearOptions::early_rule_levels) changes what Newton's first iterations
+// cost, not the answer: a large pull from rest, taken in several load steps, evaluates most of
+// its forces on it and reaches the answer of the model's rule alone, converged and checked on the
+// model's rule; a drag step continuing from the last answer (one load step) does not use it.
+TEST(NonlinearSolver, TheEarlyRuleChangesTheCostNotTheAnswer) {
+  const Material aluminium{6.9e10, 0.32, 0.002, 2700.0};
+  ControlMesh mesh = test::load_asset_mesh("catmark_gregory_test5.obj");
+  const double scale = 1.0 / mesh.bounding_diagonal();
+  for (Vec3& p : mesh.positions()) p *= scale;
+  auto model = ShellModel::build(mesh, aluminium).value();
+  DeformationRequest request;
+  request.vertex_constraints = test::bottom_supports(mesh, model->component_of());
+  const SurfacePoint grab = test::topmost_face_centre(model->evaluator());
+  request.limit_constraints.push_back({grab, Vec3(0.25, 0.05, 0.0), {}, {}});
+  NonlinearOptions without;
+  without.early_rule_levels = -1;
+  NonlinearSolver early_solver(model, std::make_shared<FactorCache>());
+  auto with_early = early_solver.solve(request);
+  auto model_rule_only = NonlinearSolver(model, std::make_shared<FactorCache>(), without).solve(request);
+  ASSERT_TRUE(with_early.ok()) << with_early.error().message;
+  ASSERT_TRUE(model_rule_only.ok()) << model_rule_only.error().message;
+  EXPECT_EQ(model_rule_only->stats.early_evaluations, 0);
+  ASSERT_GT(with_early->stats.load_steps, 1);
+  EXPECT_GT(2 * with_early->stats.early_evaluations, with_early->stats.evaluations);
+  for (const auto* answer : {&with_early, &model_rule_only}) {
+    EXPECT_LT((*answer)->stats.residual, 1e-8);
+    EXPECT_LE((*answer)->stats.check_ratio, 1.0);
+  }
+  const double apart = (with_early->displacement - model_rule_only->displacement).norm();
+  EXPECT_LT(apart, 1e-6 * model_rule_only->displacement.norm());
+  std::printf("early rule: %d of %d evaluations, %d iterations, %d load steps; without: %d iterations; apart %.1e\n",
+              with_early->stats.early_evaluations, with_early->stats.evaluations, with_early->stats.iterations,
+              with_early->stats.load_steps, model_rule_only->stats.iterations,
+              apart / model_rule_only->displacement.norm());
+
+  // A drag step from that answer: one load step, on the model's rule throughout.
+  request.limit_constraints[0].displacement = Vec3(0.26, 0.05, 0.0);
+  auto step = early_solver.solve(request, with_early->displacement);
+  ASSERT_TRUE(step.ok()) << step.error().message;
+  EXPECT_EQ(step->stats.load_steps, 1);
+  EXPECT_EQ(step->stats.early_evaluations, 0);
+  EXPECT_LT(step->stats.residual, 1e-8);
+
+  NonlinearOptions bad;
+  bad.early_rule_levels = 9;
+  EXPECT_THROW(NonlinearSolver(model, std::make_shared<FactorCache>(), bad), std::exception);
+}
+
 TEST(NonlinearSolver, RefusesWhatItCannotBringToEquilibrium) {
   Cantilever c;
   auto model = ShellModel::build(c.mesh, material()).value();

@@ -227,10 +227,14 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, const std::vecto
 
 std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<const ShellModel> model, int threads,
                                                             int jacobian_gauss_points,
-                                                            std::shared_ptr<Executor> executor) {
+                                                            std::shared_ptr<Executor> executor,
+                                                            int early_rule_levels) {
   if (!model) fail(ErrorCode::kInvalidArgument, "NonlinearShell needs a model");
   if (jacobian_gauss_points < 0 || jacobian_gauss_points > 10) {
     fail(ErrorCode::kInvalidArgument, "NonlinearShell: jacobian_gauss_points must be 0..10");
+  }
+  if (early_rule_levels < -1 || early_rule_levels > 8) {
+    fail(ErrorCode::kInvalidArgument, "NonlinearShell: early_rule_levels must be -1 (none) or 0..8");
   }
   std::shared_ptr<NonlinearShell> shell(new NonlinearShell());
   shell->model_ = model;
@@ -250,6 +254,25 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
   }
   const QuadratureOptions& quadrature = m.options().quadrature;
   shell->build_rule(cells, {quadrature.gauss_points, quadrature.ev_ring_gauss_points}, threads, shell->fine_);
+  if (early_rule_levels >= 0 && early_rule_levels < quadrature.ev_refinement_levels) {
+    // The model's rule with fewer levels, built as the model's is (face_rule).
+    QuadratureOptions early = quadrature;
+    early.ev_refinement_levels = early_rule_levels;
+    const IrregularCorners irregular(m.evaluator().mesh());
+    std::vector<Cell> early_cells(cells.size());
+    shell->executor_->parallel_for(0, static_cast<int64_t>(cells.size()), [&](int64_t c) {
+      const Cell& cell = cells[static_cast<size_t>(c)];
+      FaceRule rule;
+      face_rule(m.evaluator(), early, cell.face, cell.subface, irregular.corners(cell.face, cell.subface), rule);
+      early_cells[static_cast<size_t>(c)] = Cell{cell.face, cell.subface, std::move(rule.uvs), std::move(rule.weights)};
+    }, shell->workers(threads));
+    size_t points = 0;
+    for (const Cell& cell : early_cells) points += cell.uvs.size();
+    // Fewer points by a third or more, or it is not worth its memory.
+    if (3 * points <= 2 * shell->fine_.points) {
+      shell->build_rule(early_cells, {quadrature.gauss_points, quadrature.ev_ring_gauss_points}, threads, shell->early_);
+    }
+  }
   if (jacobian_gauss_points > 0) {
     std::vector<double> gp, gw;
     gauss_legendre_01(jacobian_gauss_points, gp, gw);
@@ -323,7 +346,7 @@ NonlinearShell::Workspace NonlinearShell::take_workspace(size_t size) const {
 size_t NonlinearShell::count_bytes() const {
   size_t bytes = sizeof(*this);
   bytes += static_cast<size_t>(coarse_error_.nonZeros()) * (sizeof(double) + sizeof(int));
-  for (const Rule* rule : {&fine_, &coarse_}) {
+  for (const Rule* rule : {&fine_, &coarse_, &early_}) {
     bytes += rule->reference.size() * sizeof(double);
     for (const Element& e : rule->elements) {
       bytes += sizeof(Element) + (e.indices.size() + e.offsets.size()) * sizeof(int32_t);
@@ -335,7 +358,13 @@ size_t NonlinearShell::count_bytes() const {
 
 bool NonlinearShell::evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_pressure,
                               bool with_points) const {
+  state.early = false;
   return evaluate_rule(fine_, u, state, with_pressure, with_points);
+}
+
+bool NonlinearShell::evaluate_early(const Eigen::VectorXd& u, ShellState& state, bool with_pressure) const {
+  state.early = true;
+  return evaluate_rule(early_, u, state, with_pressure, false);
 }
 
 bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, ShellState& state,

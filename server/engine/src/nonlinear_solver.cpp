@@ -87,6 +87,13 @@ constexpr int kMaxTrustSteps = 100;        // trust-region steps per load step
 // enough for Newton's next step. Measured from rest on catmark_righthanded: 19 Newton iterations
 // instead of 24, 385-395 ms instead of 494-511 ms (1e-3: 22 iterations).
 constexpr double kStepTolerance = 1e-2;
+// The early rule (Run::early_) serves while the relative out-of-balance force is above this (the
+// Newton step from below it is evaluated on the model's rule), and for the whole of a load step
+// whose tolerance is kEarlyStepTolerance or looser: its forces differ from the model's rule's by
+// 1e-5..1e-4 of the forces acting (catmark_righthanded's drag, 2 levels against 6;
+// docs/benchmarks.md).
+constexpr double kEarlyRuleUntil = 1e-3;
+constexpr double kEarlyStepTolerance = 1e-3;
 constexpr double kMinLoadStep = 1.0 / 1024.0;
 // The first load step turns the surface by about this much (radians) in the linear estimate:
 // Newton converges from there in a few iterations, and later steps have a secant predictor.
@@ -115,7 +122,9 @@ class Run {
   bool evaluate(const Eigen::VectorXd& u, ShellState& state, bool with_points) {
     ++stats_.evaluations;
     const auto t0 = Clock::now();
-    const bool ok = shell_.evaluate(u, state, pressure_ != 0.0, with_points);
+    if (early_) ++stats_.early_evaluations;
+    const bool ok = early_ ? shell_.evaluate_early(u, state, pressure_ != 0.0)
+                           : shell_.evaluate(u, state, pressure_ != 0.0, with_points);
     stats_.evaluate_ms += ms_between(t0, Clock::now());
     return ok;
   }
@@ -132,6 +141,17 @@ class Run {
     if (pressure_ != 0.0) applied += lambda * pressure_ * s.pressure_force;
     if (lambda < 1.0) applied += (1.0 - lambda) * r0_;
     return std::max({applied.norm(), s.internal_force.norm(), force_floor_ * s.max_gradient, 1e-300});
+  }
+  // From the early rule to the model's: the current state evaluated again on the model's rule (the
+  // factor and the coarse state, made at the same displacement, stay).
+  void leave_early() {
+    early_ = false;
+    crossed_rules_ = true;
+    const Eigen::VectorXd u = state_.displacement;
+    if (!evaluate(u, state_)) {
+      fail(ErrorCode::kInternal,
+           "the nonlinear solve could not evaluate on the model's rule a state it had evaluated on the early rule");
+    }
   }
   // The per-point data of exact tangents at the current state (evaluated again if it was left out).
   void ensure_points() {
@@ -175,6 +195,10 @@ class Run {
   void move_to(ShellState& next) {
     u_ = next.displacement;
     if (approximate_) measure_miss(next);
+    // Across rules the change of the forces holds the rules' difference: no miss measured, and the
+    // next iteration's speed judges nothing (solve_step).
+    crossed_rules_ = next.early != state_.early;
+    if (crossed_rules_) miss_.resize(0);
     std::swap(state_, next);
     fresh_ = false;
   }
@@ -234,6 +258,14 @@ class Run {
   // Set where exact directions followed approximate ones in this load step: their products may be
   // differences of the forces (tangent_times), and its states leave out the per-point data.
   bool differences_ = false;
+  // Set while the forces are evaluated on the shell's early rule (NonlinearShell::evaluate_early:
+  // the model's rule with fewer levels at extraordinary vertices, a few times cheaper, its forces
+  // 1e-5..1e-4 of the forces acting off the model's) in a request taken in several load steps:
+  // for the whole of an intermediate load step (its tolerance, 1e-2, is far above what the rules
+  // differ by), and in the last one until the out-of-balance force is below kEarlyRuleUntil. The
+  // answer converges, and is checked, on the model's rule.
+  bool early_ = false;
+  bool crossed_rules_ = false;  // the last step went from one rule to the other (move_to)
   ShellState difference_state_;  // the state a difference is taken at, its arrays kept
   ShellState coarse_;  // the state on the coarse rule, at state_'s displacement (when approximate_)
   ShellState spare_, coarse_spare_;  // the last states replaced, their arrays reused by the next
@@ -606,6 +638,12 @@ bool Run::solve_step(double lambda, double tolerance) {
   // step's answer says little about how good the approximation is near this one's. (Set before
   // the step's first evaluation, which then leaves out the per-point data.)
   start_approximate();
+  // The early rule in the load steps of a request taken in several (every one starts far from its
+  // answer), not in a request's only step: a drag step starts 1-3 iterations from where the
+  // model's rule is needed, and switching there costs an evaluation more than it saves (measured
+  // on catmark_righthanded's drag: 6.0 Newton iterations a step instead of 5.4).
+  early_ = approximate_ && shell_.has_early_rule() && (lambda < 1.0 || stats_.load_steps > 1);
+  crossed_rules_ = false;
   // The last load step's Krylov counts judged the factor at that step's states; this one judges
   // it by its own first solve (from rest on catmark_righthanded: 4 refreshes instead of 5, the
   // same iterations).
@@ -614,7 +652,10 @@ bool Run::solve_step(double lambda, double tolerance) {
   if (state_.displacement.size() != u_.size() || state_.displacement != u_) {
     if (!evaluate(u_, state_)) return false;
     fresh_ = false;
+  } else if (state_.early && !early_) {
+    if (!evaluate(u_, state_)) return false;
   }
+  const bool intermediate = lambda < 1.0 && tolerance >= kEarlyStepTolerance;
   double first_out = 0.0, previous = 1.0, eta_cap = 1e-3;
   // The residuals of the last two iterations that started with the rows met (the stall test).
   double last_met = HUGE_VAL, before_met = HUGE_VAL;
@@ -627,11 +668,17 @@ bool Run::solve_step(double lambda, double tolerance) {
       give_up(reached_, "its time limit of " + internal::format_number(options_.time_limit_seconds) +
                           " s ran out; residual " + scientific(last_residual_));
     }
+    if (early_ && (!approximate_ || trust_)) leave_early();  // exact directions, trust region: the model's rule
     const Eigen::VectorXd r = residual(state_, lambda);
     const Eigen::VectorXd g = row_residual(u_, lambda);
     const double out = reactions_->out_of_balance(r).norm(), scale = force_scale(state_, lambda);
     const bool rows_ok = rows_met(g, u_);
     last_residual_ = out / scale;
+    if (early_ && rows_ok && last_residual_ <= tolerance) {
+      if (intermediate) return true;
+      leave_early();
+      continue;
+    }
     if (last_residual_ <= tolerance && rows_ok) return true;
     if (it == 0) first_out = out;
     // A step that has not gained two orders of magnitude in 20 Newton iterations is too large;
@@ -653,6 +700,11 @@ bool Run::solve_step(double lambda, double tolerance) {
     if (!trust_ && rows_ok && res > 1e-2 && res > 0.5 * before_met && pressure_ == 0.0) {
       if (!fresh_) refresh_tangent();
       trust_ = indefinite_;
+      if (trust_ && early_) {
+        leave_early();
+        --stats_.iterations;  // this one computed no direction: the next does, on the model's rule
+        continue;
+      }
     }
     if (rows_ok) {
       before_met = last_met;
@@ -674,11 +726,16 @@ bool Run::solve_step(double lambda, double tolerance) {
     //  - otherwise the nonlinearity, which neither would help: far from the answer Newton is slow
     //    on the exact tangent too, and an exact direction costs 5-10 times more (measured from
     //    rest on catmark_righthanded: 2.5 s switching at the first slow iteration, 1.2 s so).
-    if (it > 0 && res > 0.2 * previous) {
+    if (it > 0 && res > 0.2 * previous && !crossed_rules_) {
       const double missed = approximate_ && miss_.size() == r.size() ? reactions_->out_of_balance(miss_).norm() : 0.0;
       if (approximate_ && missed > 0.5 * out) {
         approximate_ = false;
         differences_ = true;
+        if (early_) {
+          leave_early();
+          --stats_.iterations;  // as above
+          continue;
+        }
       } else if (!approximate_ || missed < 1e-3 * out) {
         eta_cap = std::max(1e-8, 0.01 * eta_cap);
       }
@@ -690,6 +747,9 @@ bool Run::solve_step(double lambda, double tolerance) {
     // The Newton step, whole: in a thin shell it often overshoots into large membrane forces
     // that the next step removes, so neither the force nor the energy is a useful merit. It is
     // shortened only if it folds the surface or multiplies the force a thousandfold.
+    // A step from below kEarlyRuleUntil lands where the rules' difference would be most of what is
+    // left: it is evaluated on the model's rule (and the iteration stays there).
+    if (early_ && !intermediate && res <= kEarlyRuleUntil) early_ = false;
     ShellState& trial = spare_;  // its arrays reused: a state of the model's rule is tens of MB
     bool accepted = false;
     for (double alpha = 1.0; alpha > 1e-3 && !accepted; alpha *= 0.25) {
@@ -740,7 +800,8 @@ double Run::check_answer(const Eigen::VectorXd& u) {
   }
   ShellState checked;
   const ShellState* s = &state_;
-  if (state_.displacement.size() != u.size() || state_.displacement != u) {
+  early_ = false;  // checked on the model's rule
+  if (state_.displacement.size() != u.size() || state_.displacement != u || state_.early) {
     if (!evaluate(u, checked)) fail(ErrorCode::kUnprocessable, refused + "the answer folds the surface onto itself");
     s = &checked;
   }
@@ -880,7 +941,7 @@ NonlinearSolution Run::run() {
 
   auto out = std::make_shared<NonlinearMemory>();
   out->end = solution.displacement;
-  if (state_.displacement.size() == ndof && state_.displacement == solution.displacement) {
+  if (state_.displacement.size() == ndof && state_.displacement == solution.displacement && !state_.early) {
     out->end_force = state_.internal_force;
   }
   out->fixed = problem_.fixed;
@@ -905,10 +966,11 @@ NonlinearSolver::NonlinearSolver(std::shared_ptr<const ShellModel> model, std::s
   if (!cache_) cache_ = std::make_shared<FactorCache>();
   if (!(options_.tolerance > 0.0) || options_.tolerance >= 1.0 || options_.max_iterations < 1 ||
       options_.max_load_steps < 1 || options_.tangent_gauss_points < 0 || options_.tangent_gauss_points > 10 ||
+      options_.early_rule_levels < -1 || options_.early_rule_levels > 8 ||
       !(options_.time_limit_seconds >= 0.0) || !std::isfinite(options_.time_limit_seconds)) {
     fail(ErrorCode::kInvalidArgument,
          "nonlinear options: tolerance must be in (0, 1), max_iterations and max_load_steps >= 1, "
-         "tangent_gauss_points 0..10, time_limit_seconds finite and >= 0");
+         "tangent_gauss_points 0..10, early_rule_levels -1..8, time_limit_seconds finite and >= 0");
   }
 }
 
@@ -916,7 +978,10 @@ NonlinearSolver::~NonlinearSolver() = default;
 
 std::shared_ptr<const internal::NonlinearShell> NonlinearSolver::shell() const {
   std::lock_guard lock(mutex_);
-  if (!shell_) shell_ = internal::NonlinearShell::build(model_, options_.threads, options_.tangent_gauss_points, options_.executor);
+  if (!shell_) {
+    shell_ = internal::NonlinearShell::build(model_, options_.threads, options_.tangent_gauss_points, options_.executor,
+                                             options_.approximate_directions ? options_.early_rule_levels : -1);
+  }
   return shell_;
 }
 

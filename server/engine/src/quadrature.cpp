@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 
 namespace softshell::engine::internal {
@@ -138,6 +139,72 @@ void cell_points(const std::vector<Cell>& cells, int gauss_points, std::vector<s
       }
     }
     first_point.push_back(out_uv.size());
+  }
+}
+
+// max/min over the points of one cell of the area element and of both tangents' lengths (1 for
+// a uniform parametrization).
+namespace {
+
+double cell_distortion(const Eigen::MatrixXd& basis, const Eigen::MatrixX3d& x, Eigen::Index first_point,
+                       Eigen::Index points) {
+  Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d high = Eigen::Vector3d::Zero();
+  for (Eigen::Index q = first_point; q < first_point + points; ++q) {
+    const Eigen::RowVector3d a1 = basis.row(6 * q + 1) * x, a2 = basis.row(6 * q + 2) * x;
+    const Eigen::Vector3d size(a1.cross(a2).norm(), a1.norm(), a2.norm());
+    low = low.cwiseMin(size);
+    high = high.cwiseMax(size);
+  }
+  if (!(low.minCoeff() > 0.0)) return std::numeric_limits<double>::infinity();
+  return high.cwiseQuotient(low).maxCoeff();
+}
+
+}  // namespace
+
+void face_rule(const LimitEvaluator& evaluator, const QuadratureOptions& quad, int32_t face, int32_t subface,
+               uint8_t corner_mask, FaceRule& out) {
+  // The cells: dyadic toward extraordinary corners, then split where the parametrization is far
+  // from uniform, one round of stencil evaluations per split level.
+  std::vector<Cell> cells, next;
+  out.cells.clear();
+  face_cells(evaluator, face, subface, quad.gauss_points, quad.ev_ring_gauss_points, quad.ev_refinement_levels,
+             corner_mask, cells);
+  Eigen::MatrixX3d x;
+  bool split_any = false;
+  for (int round = 0;; ++round) {
+    cell_points(cells, quad.gauss_points, out.uvs, out.weights, out.first_point);
+    evaluator.face_stencils(face, subface, out.uvs, out.indices, out.basis);
+    if (round == 0) {
+      x.resize(static_cast<Eigen::Index>(out.indices.size()), 3);
+      for (Eigen::Index a = 0; a < x.rows(); ++a) {
+        x.row(a) = evaluator.mesh().positions()[static_cast<size_t>(out.indices[static_cast<size_t>(a)])].transpose();
+      }
+    }
+    if (quad.max_cell_distortion <= 0.0 || round == quad.max_distortion_splits) {
+      out.cells.insert(out.cells.end(), cells.begin(), cells.end());
+      break;
+    }
+    next.clear();
+    for (size_t c = 0; c < cells.size(); ++c) {
+      // Cells at an extraordinary vertex are never uniform; their rule is made for them.
+      if (cells[c].ev_corner < 0 &&
+          cell_distortion(out.basis, x, static_cast<Eigen::Index>(out.first_point[c]),
+                          static_cast<Eigen::Index>(out.first_point[c + 1] - out.first_point[c])) >
+              quad.max_cell_distortion) {
+        const auto quarters = split(cells[c]);
+        next.insert(next.end(), quarters.begin(), quarters.end());
+      } else {
+        out.cells.push_back(cells[c]);
+      }
+    }
+    if (next.empty()) break;
+    split_any = true;
+    cells.swap(next);
+  }
+  if (split_any) {  // the stencils of the final cells, in one evaluation
+    cell_points(out.cells, quad.gauss_points, out.uvs, out.weights, out.first_point);
+    evaluator.face_stencils(face, subface, out.uvs, out.indices, out.basis);
   }
 }
 

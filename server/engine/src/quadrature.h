@@ -70,6 +70,22 @@ void face_cells(const LimitEvaluator& evaluator, int32_t face, int32_t subface, 
 void cell_points(const std::vector<Cell>& cells, int gauss_points, std::vector<std::array<double, 2>>& out_uv,
                  std::vector<double>& out_weight, std::vector<size_t>& first_point);
 
+/// The model's rule on one (sub-)face for `quad`: face_cells, then (up to
+/// quad.max_distortion_splits rounds) the cells whose parametrization is far from uniform split in
+/// four; their points and weights (cell_points) and the stencils there (6 rows per point,
+/// LimitEvaluator::face_stencils), which the distortion test needed anyway. The linear model is
+/// integrated on it; the nonlinear shell builds a cheaper rule with fewer levels the same way.
+struct FaceRule {
+  std::vector<Cell> cells;
+  std::vector<std::array<double, 2>> uvs;
+  std::vector<double> weights;
+  std::vector<size_t> first_point;
+  std::vector<int32_t> indices;  // the face's control points
+  Eigen::MatrixXd basis;         // 6 rows per point, a column per control point
+};
+void face_rule(const LimitEvaluator& evaluator, const QuadratureOptions& quad, int32_t face, int32_t subface,
+               uint8_t corner_mask, FaceRule& out);
+
 /// The pressure load (integral of N_A n dA, 3 x indices.size(), columns for the control points
 /// `indices`) of the cells at extraordinary corners, exactly (LimitEvaluator::
 /// ev_corner_normal_weights: no point rule integrates it there); `exact[c]` set for those cells.

@@ -38,67 +38,19 @@ struct FaceWork {
   uint8_t corner_mask;
 };
 
-// max/min over the points of one cell of the area element and of both tangents' lengths (1 for
-// a uniform parametrization).
-double cell_distortion(const Eigen::MatrixXd& basis, const Eigen::MatrixX3d& x, Eigen::Index first_point,
-                       Eigen::Index points) {
-  Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
-  Eigen::Vector3d high = Eigen::Vector3d::Zero();
-  for (Eigen::Index q = first_point; q < first_point + points; ++q) {
-    const Eigen::RowVector3d a1 = basis.row(6 * q + 1) * x, a2 = basis.row(6 * q + 2) * x;
-    const Eigen::Vector3d size(a1.cross(a2).norm(), a1.norm(), a2.norm());
-    low = low.cwiseMin(size);
-    high = high.cwiseMax(size);
-  }
-  if (!(low.minCoeff() > 0.0)) return std::numeric_limits<double>::infinity();
-  return high.cwiseQuotient(low).maxCoeff();
-}
-
 void integrate_element(const LimitEvaluator& evaluator, const Material& material, const QuadratureOptions& quad,
                        const FaceWork& work, Element& out) {
-  // The cells: dyadic toward extraordinary corners, then split where the parametrization is far
-  // from uniform, one round of stencil evaluations per split level.
-  std::vector<internal::Cell> cells, accepted, next;
-  internal::face_cells(evaluator, work.face, work.subface, quad.gauss_points, quad.ev_ring_gauss_points,
-                       quad.ev_refinement_levels, work.corner_mask, cells);
-  std::vector<std::array<double, 2>> uvs;
-  std::vector<double> weights;
-  std::vector<size_t> first_point;
-  Eigen::MatrixXd basis;
-  Eigen::MatrixX3d x;
-  bool split_any = false;
-  for (int round = 0;; ++round) {
-    internal::cell_points(cells, quad.gauss_points, uvs, weights, first_point);
-    evaluator.face_stencils(work.face, work.subface, uvs, out.indices, basis);
-    if (round == 0) {
-      x.resize(static_cast<Eigen::Index>(out.indices.size()), 3);
-      for (Eigen::Index a = 0; a < x.rows(); ++a) {
-        x.row(a) = evaluator.mesh().positions()[static_cast<size_t>(out.indices[static_cast<size_t>(a)])].transpose();
-      }
-    }
-    if (quad.max_cell_distortion <= 0.0 || round == quad.max_distortion_splits) {
-      accepted.insert(accepted.end(), cells.begin(), cells.end());
-      break;
-    }
-    next.clear();
-    for (size_t c = 0; c < cells.size(); ++c) {
-      // Cells at an extraordinary vertex are never uniform; their rule is made for them.
-      if (cells[c].ev_corner < 0 &&
-          cell_distortion(basis, x, static_cast<Eigen::Index>(first_point[c]),
-                          static_cast<Eigen::Index>(first_point[c + 1] - first_point[c])) > quad.max_cell_distortion) {
-        const auto quarters = internal::split(cells[c]);
-        next.insert(next.end(), quarters.begin(), quarters.end());
-      } else {
-        accepted.push_back(cells[c]);
-      }
-    }
-    if (next.empty()) break;
-    split_any = true;
-    cells.swap(next);
-  }
-  if (split_any) {  // the stencils of the final cells, in one evaluation
-    internal::cell_points(accepted, quad.gauss_points, uvs, weights, first_point);
-    evaluator.face_stencils(work.face, work.subface, uvs, out.indices, basis);
+  internal::FaceRule rule;
+  internal::face_rule(evaluator, quad, work.face, work.subface, work.corner_mask, rule);
+  const std::vector<internal::Cell>& accepted = rule.cells;
+  const std::vector<std::array<double, 2>>& uvs = rule.uvs;
+  const std::vector<double>& weights = rule.weights;
+  const std::vector<size_t>& first_point = rule.first_point;
+  const Eigen::MatrixXd& basis = rule.basis;
+  out.indices = rule.indices;
+  Eigen::MatrixX3d x(static_cast<Eigen::Index>(out.indices.size()), 3);
+  for (Eigen::Index a = 0; a < x.rows(); ++a) {
+    x.row(a) = evaluator.mesh().positions()[static_cast<size_t>(out.indices[static_cast<size_t>(a)])].transpose();
   }
   const auto m = x.rows();
 
