@@ -58,7 +58,7 @@ class NonlinearShell {
   /// on at most `threads` of its threads (0 = all of them). `jacobian_gauss_points` > 0 adds a
   /// second, coarse rule (that many Gauss points per direction on every (sub-)face, no
   /// refinement) for `assemble_jacobian`: a tangent at the current state at a fraction of the
-  /// cost, for the solver's linear solves (the residual always uses the model's rule).
+  /// cost, for the solver's linear solves (the answer's residual always uses the model's rule).
   /// `early_rule_levels` >= 0 adds a third rule, the model's with that many refinement levels
   /// toward extraordinary vertices (if that saves a third of the points or more): forces a few
   /// times cheaper and 1e-5..1e-4 of the forces off the model's, for Newton's first iterations.

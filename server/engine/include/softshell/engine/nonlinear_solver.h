@@ -41,8 +41,8 @@ struct NonlinearOptions {
   /// Gauss points per direction on each (sub-)face of the coarse rule (0: none, the model's own
   /// rule everywhere). The preconditioner's tangent is integrated with it, and so is the
   /// nonlinear remainder of the tangent the Newton directions solve while Newton on it converges
-  /// fast (`approximate_directions`). The residual, and so the answer, always uses the model's
-  /// rule. Range 0..10.
+  /// fast (`approximate_directions`). The answer's residual always uses the model's rule (the
+  /// first iterations' may use the early rule, `early_rule_levels`). Range 0..10.
   int tangent_gauss_points = 4;
   /// Newton directions on K plus the coarse rule's nonlinear remainder of the tangent (measured on
   /// catmark_righthanded: a Krylov iteration of about 2 ms instead of 7-23 ms) until an iteration gains
