@@ -212,20 +212,32 @@ TEST(NonlinearSolver, EveryKindOfNewtonDirectionGivesTheSameAnswer) {
 // lowest 5% as in bench_engine, its topmost face's centre pulled by a tenth of its size from
 // rest in one request: a converged answer that passes the check, with the grab where it was
 // asked to be. (The larger meshes run in bench_engine, too slow for every CI run.)
+// A shipped mesh scaled to a 1 m diagonal, aluminium 2 mm thick, held by its lowest 5% as in
+// bench_engine, its topmost face's centre pulled to `target` from rest.
+struct ShippedPull {
+  ControlMesh mesh;
+  std::shared_ptr<const ShellModel> model;
+  DeformationRequest request;
+  SurfacePoint grab;
+};
+ShippedPull shipped_pull(const char* name, const Vec3& target) {
+  ShippedPull pull;
+  pull.mesh = test::load_asset_mesh(name);
+  const double scale = 1.0 / pull.mesh.bounding_diagonal();
+  for (Vec3& p : pull.mesh.positions()) p *= scale;
+  pull.model = ShellModel::build(pull.mesh, Material{6.9e10, 0.32, 0.002, 2700.0}).value();
+  pull.request.vertex_constraints = test::bottom_supports(pull.mesh, pull.model->component_of());
+  pull.grab = test::topmost_face_centre(pull.model->evaluator());
+  pull.request.limit_constraints.push_back({pull.grab, target, {}, {}});
+  return pull;
+}
+
 TEST(NonlinearSolver, EverySmallShippedMeshTakesALargePull) {
-  const Material aluminium{6.9e10, 0.32, 0.002, 2700.0};
   for (const char* name : {"blub_control_mesh.obj", "catmark_cube.obj", "catmark_gregory_test5.obj", "catmark_helmet.obj",
                            "catmark_nonquads.obj", "catmark_tent.obj", "catmark_torus.obj", "penguin_control_mesh.obj",
                            "spot_control_mesh.obj"}) {
-    ControlMesh mesh = test::load_asset_mesh(name);
-    const double scale = 1.0 / mesh.bounding_diagonal();
-    for (Vec3& p : mesh.positions()) p *= scale;
-    auto model = ShellModel::build(mesh, aluminium).value();
-    DeformationRequest request;
-    request.vertex_constraints = test::bottom_supports(mesh, model->component_of());
-    const SurfacePoint grab = test::topmost_face_centre(model->evaluator());
     const Vec3 target(0.1, 0.03, 0.0);
-    request.limit_constraints.push_back({grab, target, {}, {}});
+    const auto [mesh, model, request, grab] = shipped_pull(name, target);
     auto answer = NonlinearSolver(model, std::make_shared<FactorCache>()).solve(request);
     ASSERT_TRUE(answer.ok()) << name << ": " << answer.error().message;
     EXPECT_LT(answer->stats.residual, 1e-8) << name;
@@ -241,15 +253,7 @@ TEST(NonlinearSolver, EverySmallShippedMeshTakesALargePull) {
 // its forces on it and reaches the answer of the model's rule alone, converged and checked on the
 // model's rule; a drag step continuing from the last answer (one load step) does not use it.
 TEST(NonlinearSolver, TheEarlyRuleChangesTheCostNotTheAnswer) {
-  const Material aluminium{6.9e10, 0.32, 0.002, 2700.0};
-  ControlMesh mesh = test::load_asset_mesh("catmark_gregory_test5.obj");
-  const double scale = 1.0 / mesh.bounding_diagonal();
-  for (Vec3& p : mesh.positions()) p *= scale;
-  auto model = ShellModel::build(mesh, aluminium).value();
-  DeformationRequest request;
-  request.vertex_constraints = test::bottom_supports(mesh, model->component_of());
-  const SurfacePoint grab = test::topmost_face_centre(model->evaluator());
-  request.limit_constraints.push_back({grab, Vec3(0.25, 0.05, 0.0), {}, {}});
+  auto [mesh, model, request, grab] = shipped_pull("catmark_gregory_test5.obj", Vec3(0.25, 0.05, 0.0));
   NonlinearOptions without;
   without.early_rule_levels = -1;
   NonlinearSolver early_solver(model, std::make_shared<FactorCache>());
