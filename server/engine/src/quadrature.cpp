@@ -142,10 +142,10 @@ void cell_points(const std::vector<Cell>& cells, int gauss_points, std::vector<s
   }
 }
 
-// max/min over the points of one cell of the area element and of both tangents' lengths (1 for
-// a uniform parametrization).
 namespace {
 
+// max/min over the points of one cell of the area element and of both tangents' lengths (1 for
+// a uniform parametrization).
 double cell_distortion(const Eigen::MatrixXd& basis, const Eigen::MatrixX3d& x, Eigen::Index first_point,
                        Eigen::Index points) {
   Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());

@@ -7,7 +7,7 @@
 // irregular corner and each cell gets its own Gauss rule. Quads whose corners are regular but
 // touch a non-quad face are 2 x 2 bicubic pieces (the children of one subdivision step): they are
 // split once. Cells whose parametrization is strongly non-uniform are
-// split further by the integration itself (shell_model.cpp), which sees the geometry.
+// split further where the geometry is known (face_rule).
 
 #include <array>
 #include <cstdint>
