@@ -218,7 +218,6 @@ struct CholeskyFactor::State {
   ~State() {
     if (l) g_spare_factors.keep(analysis, l);
   }
-  bool two_threads(const Executor* executor) const { return sweeps && executor && executor->concurrency() > 1; }
 
   // Runs CHOLMOD's solve of `system` (CHOLMOD_L, _Lt, _P, _Pt, _A) on a block of right-hand sides.
   Eigen::MatrixXd apply(int system, const Eigen::MatrixXd& rhs) const;
@@ -363,6 +362,22 @@ Eigen::MatrixXd CholeskyFactor::State::apply(int system, const Eigen::MatrixXd& 
   return out;
 }
 
+namespace {
+
+// Runs sweep(x), with one right-hand side as a vector (Eigen's vector kernels).
+template <class Sweep>
+void by_columns(Eigen::MatrixXd& x, Sweep&& sweep) {
+  if (x.cols() != 1) {
+    sweep(x);
+    return;
+  }
+  Eigen::VectorXd v = x.col(0);
+  sweep(v);
+  x.col(0) = v;
+}
+
+}  // namespace
+
 bool CholeskyFactor::State::own_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read,
                                        Executor* executor) const {
   if (layout.supernodes == 0 || rhs.cols() == 0) return false;
@@ -380,13 +395,7 @@ bool CholeskyFactor::State::own_forward(const Eigen::MatrixXd& rhs, Eigen::Matri
   for (Eigen::Index k = 0; k < n; ++k) x.row(k) = rhs.row(perm ? perm[k] : k);
   if (plan.two_threads) {
     const std::vector<char>* only = plan.whole ? nullptr : &reached;
-    if (x.cols() == 1) {  // Eigen's vector kernels
-      Eigen::VectorXd v = x.col(0);
-      sweeps->forward(layout, v, *executor, only);
-      x.col(0) = v;
-    } else {
-      sweeps->forward(layout, x, *executor, only);
-    }
+    by_columns(x, [&](auto& xs) { sweeps->forward(layout, xs, *executor, only); });
     fraction_read = plan.whole ? 1.0 : static_cast<double>(plan.work) / static_cast<double>(layout.entries());
     return true;
   }
@@ -406,15 +415,11 @@ Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* frac
 }
 
 Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* executor) const {
-  if (!state_->two_threads(executor) || y.cols() == 0) return state_->apply(CHOLMOD_Pt, state_->apply(CHOLMOD_Lt, y));
-  Eigen::MatrixXd x = y;
-  if (x.cols() == 1) {  // Eigen's vector kernels
-    Eigen::VectorXd v = x.col(0);
-    state_->sweeps->backward(state_->layout, v, *executor);
-    x.col(0) = v;
-  } else {
-    state_->sweeps->backward(state_->layout, x, *executor);
+  if (!on_two_threads(state_->sweeps.get(), executor) || y.cols() == 0) {
+    return state_->apply(CHOLMOD_Pt, state_->apply(CHOLMOD_Lt, y));
   }
+  Eigen::MatrixXd x = y;
+  by_columns(x, [&](auto& xs) { state_->sweeps->backward(state_->layout, xs, *executor); });
   const auto* perm = static_cast<const int*>(state_->l->Perm);
   if (!perm) return x;
   Eigen::MatrixXd out(x.rows(), x.cols());

@@ -484,7 +484,7 @@ Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* frac
 Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* executor) const {
   const Symbolic& s = *state_->symbolic;
   const SupernodalLayout l = layout(s, state_->values.data());
-  const bool two_threads = s.sweeps && executor && executor->concurrency() > 1;
+  const bool two_threads = on_two_threads(s.sweeps.get(), executor);
   auto sweep = [&](auto& x) {
     if (two_threads) {
       s.sweeps->backward(l, x, *executor);

@@ -78,8 +78,7 @@ ForwardSweep plan_forward(const SupernodalLayout& l, const TwoThreadSweeps* swee
   const int64_t total = l.entries();
   f.work = reach(l, reached, total);
   f.whole = f.work > total / 2;
-  f.two_threads = sweeps && executor && executor->concurrency() > 1 &&
-                  (f.whole || f.work >= g_two_thread_sweep_entries.load() / 4);
+  f.two_threads = on_two_threads(sweeps, executor) && (f.whole || f.work >= g_two_thread_sweep_entries.load() / 4);
   return f;
 }
 

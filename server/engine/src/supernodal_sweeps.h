@@ -102,6 +102,11 @@ class TwoThreadSweeps {
   double top_share_ = 0.0;
 };
 
+/// Whether sweeps with `plan` on `executor` run on two threads (both backends' rule).
+inline bool on_two_threads(const TwoThreadSweeps* plan, const Executor* executor) {
+  return plan && executor && executor->concurrency() > 1;
+}
+
 /// One supernode's step of a sweep on one thread (the backends' own sweeps and the plan's share
 /// them, so the arithmetic is the same).
 template <class X>
