@@ -87,13 +87,12 @@ constexpr int kMaxTrustSteps = 100;        // trust-region steps per load step
 // enough for Newton's next step. Measured from rest on catmark_righthanded: 19 Newton iterations
 // instead of 24, 385-395 ms instead of 494-511 ms (1e-3: 22 iterations).
 constexpr double kStepTolerance = 1e-2;
-// The early rule (Run::early_) serves while the relative out-of-balance force is above this (the
-// Newton step from below it is evaluated on the model's rule), and for the whole of a load step
-// whose tolerance is kEarlyStepTolerance or looser: its forces differ from the model's rule's by
+// The early rule (Run::early_) serves in the last load step while the relative out-of-balance
+// force is above this (the Newton step from below it is evaluated on the model's rule), and for
+// the whole of an intermediate one (kStepTolerance): its forces differ from the model's rule's by
 // 1e-5..1e-4 of the forces acting (catmark_righthanded's drag, 2 levels against 6;
 // docs/benchmarks.md).
 constexpr double kEarlyRuleUntil = 1e-3;
-constexpr double kEarlyStepTolerance = 1e-3;
 constexpr double kMinLoadStep = 1.0 / 1024.0;
 // The first load step turns the surface by about this much (radians) in the linear estimate:
 // Newton converges from there in a few iterations, and later steps have a secant predictor.
@@ -655,7 +654,7 @@ bool Run::solve_step(double lambda, double tolerance) {
   } else if (state_.early && !early_) {
     if (!evaluate(u_, state_)) return false;
   }
-  const bool intermediate = lambda < 1.0 && tolerance >= kEarlyStepTolerance;
+  const bool intermediate = lambda < 1.0;  // to kStepTolerance: an early state is close enough
   double first_out = 0.0, previous = 1.0, eta_cap = 1e-3;
   // The residuals of the last two iterations that started with the rows met (the stall test).
   double last_met = HUGE_VAL, before_met = HUGE_VAL;
