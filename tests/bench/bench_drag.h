@@ -4,10 +4,12 @@
 // points held, a grab (limit constraint) at the centre of the topmost face, dragged across the
 // object's thinnest horizontal extent (out of the plane of a flat object) to 30% of its size.
 
+#include <cstdlib>
 #include <memory>
 
 #include "shell_benchmarks.h"
 #include "softshell/deformation.h"
+#include "softshell/engine/nonlinear_solver.h"
 #include "softshell/engine/shell_model.h"
 #include "softshell/material.h"
 
@@ -24,6 +26,16 @@ struct Drag {
   /// The grab's displacement after step `k` of `steps`.
   Vec3 grab_at(int k, int steps) const { return (0.3 * k / steps) * direction; }
 };
+
+/// The nonlinear solver's options for the drag benchmarks, with their A/B switches:
+/// SOFTSHELL_BENCH_EXACT_DIRECTIONS (set: exact Newton directions throughout) and
+/// SOFTSHELL_BENCH_EARLY_RULE_LEVELS (NonlinearOptions::early_rule_levels; -1 turns it off).
+inline engine::NonlinearOptions drag_options() {
+  engine::NonlinearOptions options;
+  options.approximate_directions = std::getenv("SOFTSHELL_BENCH_EXACT_DIRECTIONS") == nullptr;
+  if (const char* levels = std::getenv("SOFTSHELL_BENCH_EARLY_RULE_LEVELS")) options.early_rule_levels = std::atoi(levels);
+  return options;
+}
 
 inline Result<Drag> setup_drag(ControlMesh mesh) {
   const double scale = 1.0 / mesh.bounding_diagonal();

@@ -44,10 +44,7 @@ struct PathTotals {
 
 PathTotals drag_path(const bench::Drag& drag, int steps, bool verbose) {
   PathTotals totals;
-  engine::NonlinearOptions options;
-  // A/B of the early rule (docs/benchmarks.md): SOFTSHELL_BENCH_EARLY_RULE_LEVELS=-1 turns it off.
-  if (const char* levels = std::getenv("SOFTSHELL_BENCH_EARLY_RULE_LEVELS")) options.early_rule_levels = std::atoi(levels);
-  engine::NonlinearSolver solver(drag.model, std::make_shared<engine::FactorCache>(), options);
+  engine::NonlinearSolver solver(drag.model, std::make_shared<engine::FactorCache>(), bench::drag_options());
   DeformationRequest request = drag.request;
   auto first = solver.solve(request);  // the basis and the factor of K, not timed
   if (!first.ok()) {

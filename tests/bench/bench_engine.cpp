@@ -174,10 +174,7 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
   const auto& model = drag->model;
   result.points = static_cast<int>(model->quadrature().size());
   auto cache = std::make_shared<engine::FactorCache>();
-  engine::NonlinearOptions options;
-  options.approximate_directions = std::getenv("SOFTSHELL_BENCH_EXACT_DIRECTIONS") == nullptr;
-  if (const char* levels = std::getenv("SOFTSHELL_BENCH_EARLY_RULE_LEVELS")) options.early_rule_levels = std::atoi(levels);
-  engine::NonlinearSolver solver(model, cache, options);
+  engine::NonlinearSolver solver(model, cache, bench::drag_options());
   DeformationRequest request = drag->request;
   auto t0 = bench::Clock::now();
   auto first = solver.solve(request);
