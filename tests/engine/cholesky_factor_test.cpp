@@ -6,7 +6,6 @@
 // the same reference.
 #include <gtest/gtest.h>
 
-#include <atomic>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -18,11 +17,14 @@
 
 #include "cholesky_factor.h"
 #include "factorization.h"
+#include "scoped_knob.h"
 #include "softshell/executor.h"
 #include "supernodal_sweeps.h"
 
 namespace softshell::engine::internal {
 namespace {
+
+using test::ScopedKnob;
 
 using Sparse = Eigen::SparseMatrix<double>;
 
@@ -78,20 +80,6 @@ Eigen::Matrix3d node_block() {
   block << 2.0, 0.3, -0.2, 0.3, 1.5, 0.1, -0.2, 0.1, 1.8;
   return block;
 }
-
-// Sets one of the engine's test knobs for a scope, then puts its value back.
-template <class T>
-class ScopedKnob {
- public:
-  ScopedKnob(std::atomic<T>& knob, T value) : knob_(knob), before_(knob.exchange(value)) {}
-  ~ScopedKnob() { knob_.store(before_); }
-  ScopedKnob(const ScopedKnob&) = delete;
-  ScopedKnob& operator=(const ScopedKnob&) = delete;
-
- private:
-  std::atomic<T>& knob_;
-  T before_;
-};
 
 // An arrow matrix: a tridiagonal chain plus a dense last row and column (a wide root supernode).
 Sparse arrow(int n) {

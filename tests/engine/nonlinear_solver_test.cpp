@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "limit_displacement.h"
+#include "scoped_knob.h"
 #include "shell_benchmarks.h"
 #include "softshell/engine/solver.h"
 #include "solver_testing.h"
@@ -186,9 +187,10 @@ TEST(NonlinearSolver, EveryKindOfNewtonDirectionGivesTheSameAnswer) {
   for (const DeformationRequest& request : {helmet_grab(helmet), pressed}) {
     auto exact = NonlinearSolver(model, std::make_shared<FactorCache>(), exact_options).solve(request);
     auto approximate = NonlinearSolver(model, std::make_shared<FactorCache>()).solve(request);
-    internal::g_directions_by_difference.store(true);
-    auto by_difference = NonlinearSolver(model, std::make_shared<FactorCache>()).solve(request);
-    internal::g_directions_by_difference.store(false);
+    auto by_difference = [&] {
+      const test::ScopedKnob<bool> differences(internal::g_directions_by_difference, true);
+      return NonlinearSolver(model, std::make_shared<FactorCache>()).solve(request);
+    }();
     ASSERT_TRUE(exact.ok()) << exact.error().message;
     EXPECT_EQ(exact->stats.approximate_iterations, 0);
     EXPECT_EQ(exact->stats.difference_iterations, 0);
@@ -396,13 +398,10 @@ TEST(NonlinearSolver, EveryAnswerIsCheckedBeforeItLeaves) {
   EXPECT_GT(good->stats.check_ratio, 0.0);
   EXPECT_LE(good->stats.check_ratio, 1.0);
 
-  struct Hook {
-    explicit Hook(internal::FastPathCorruption f) { internal::g_corrupt_nonlinear_answer.store(f); }
-    ~Hook() { internal::g_corrupt_nonlinear_answer.store(nullptr); }
-  };
+  using Hook = test::ScopedKnob<internal::FastPathCorruption>;
   {
     // A free control point moved by 1e-4 of the size: out of equilibrium.
-    Hook hook([](Eigen::VectorXd& u) { u[3 * test::grid_index(8, 4, 2) + 2] += 4e-5; });
+    Hook hook(internal::g_corrupt_nonlinear_answer, [](Eigen::VectorXd& u) { u[3 * test::grid_index(8, 4, 2) + 2] += 4e-5; });
     auto bad = solver.solve(request);
     ASSERT_FALSE(bad.ok());
     EXPECT_EQ(bad.error().code, ErrorCode::kUnprocessable);
@@ -410,7 +409,7 @@ TEST(NonlinearSolver, EveryAnswerIsCheckedBeforeItLeaves) {
   }
   {
     // A clamped control point moved.
-    Hook hook([](Eigen::VectorXd& u) { u[3 * test::grid_index(8, 0, 2) + 2] += 1e-9; });
+    Hook hook(internal::g_corrupt_nonlinear_answer, [](Eigen::VectorXd& u) { u[3 * test::grid_index(8, 0, 2) + 2] += 1e-9; });
     auto bad = solver.solve(request);
     ASSERT_FALSE(bad.ok());
     EXPECT_EQ(bad.error().code, ErrorCode::kUnprocessable);
@@ -419,7 +418,7 @@ TEST(NonlinearSolver, EveryAnswerIsCheckedBeforeItLeaves) {
   {
     // Every free control point moved rigidly by 1e-6 of the length in z: hardly any strain, but
     // the limit constraint is off (checked first).
-    Hook hook([](Eigen::VectorXd& u) {
+    Hook hook(internal::g_corrupt_nonlinear_answer, [](Eigen::VectorXd& u) {
       for (int j = 0; j <= 4; ++j) {
         for (int i = 2; i <= 8; ++i) u[3 * test::grid_index(8, i, j) + 2] += 4e-7;
       }

@@ -5,6 +5,7 @@
 
 #include "factorization.h"
 #include "problem.h"
+#include "scoped_knob.h"
 #include "shell_benchmarks.h"
 #include "softshell/engine/solver.h"
 #include "softshell/interaction.h"
@@ -18,15 +19,6 @@ namespace {
 double relative_difference(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
   return (a - b).norm() / std::max(a.norm(), 1e-300);
 }
-
-// Installs a corruption of the fast path for the lifetime of the object.
-class Corruption {
- public:
-  explicit Corruption(internal::FastPathCorruption f) { internal::g_corrupt_fast_path.store(f); }
-  ~Corruption() { internal::g_corrupt_fast_path.store(nullptr); }
-  Corruption(const Corruption&) = delete;
-  Corruption& operator=(const Corruption&) = delete;
-};
 
 // A plate held by limit constraints (pins and Schur rows on the fast path) under a point load.
 struct HeldPlate {
@@ -60,7 +52,7 @@ TEST(SafetyNet, CorruptedFastPathIsCaughtAndAnsweredByTheRobustPath) {
            [](Eigen::VectorXd& u) { u[3 * 40 + 2] += 1e-6 * u.cwiseAbs().maxCoeff(); },
            [](Eigen::VectorXd& u) { u *= 1.0 + 1e-6; },
            [](Eigen::VectorXd& u) { u[7] = std::numeric_limits<double>::quiet_NaN(); }}) {
-    Corruption installed(corrupt);
+    const test::ScopedKnob<internal::FastPathCorruption> installed(internal::g_corrupt_fast_path, corrupt);
     auto caught = solver.solve(held.request());
     ASSERT_TRUE(caught.ok()) << caught.error().message;
     EXPECT_EQ(caught->stats.path, SolvePath::kFallback);
