@@ -19,6 +19,7 @@
 #include "factorization.h"
 #include "scoped_knob.h"
 #include "softshell/executor.h"
+#include "supernodal_numeric.h"
 #include "supernodal_sweeps.h"
 
 namespace softshell::engine::internal {
@@ -408,6 +409,35 @@ TEST(CholeskyFactor, ReportsMatricesThatAreNotPositiveDefinite) {
   Sparse nan_off = grid_laplacian(5, 5, 0.1);
   nan_off.coeffRef(7, 8) = nan_off.coeffRef(8, 7) = std::numeric_limits<double>::quiet_NaN();
   expect_refused(nan_off, "NaN off the diagonal", true);
+}
+
+// The numeric factorization's kernels (supernodal_numeric.h) are built twice, for the baseline and
+// for x86-64-v3, and the second runs where the CPU has it. Both factor exactly (against dense and
+// sparse references), refuse what is not positive definite or finite, and agree with each other
+// to round-off (they differ only in the order of their sums).
+TEST(CholeskyFactor, BothKernelBuildsFactorAlike) {
+  RecordProperty("kernels", supernodal_kernels());
+  const Eigen::Matrix3d block = node_block();
+  const Sparse a = with_blocks(grid_laplacian(30, 30, 0.05), block);  // large enough to be supernodal
+  const Eigen::MatrixXd b = random_rhs(a.rows(), 2, 9);
+  const auto fast = factor_of(a);
+  ASSERT_TRUE(fast);
+  const ScopedKnob<bool> baseline(g_supernodal_baseline_kernels, true);
+  EXPECT_STREQ(supernodal_kernels(), "baseline");
+  const auto slow = factor_of(a);
+  ASSERT_TRUE(slow);
+  EXPECT_LT(relative_error(slow->forward(b), fast->forward(b)), 1e-13);
+  const Eigen::SimplicialLLT<Sparse> reference(a);
+  ASSERT_EQ(reference.info(), Eigen::Success);
+  EXPECT_LT(relative_error(slow->backward(slow->forward(b)), reference.solve(b)), 1e-11);
+  expect_matches_dense(with_blocks(grid_laplacian(8, 6, 0.2), block), "baseline kernels, 3 DOFs per node");
+  expect_matches_dense(dense_spd(150, 3), "baseline kernels, dense 150 x 150");
+  Sparse indefinite = a;
+  indefinite.coeffRef(1000, 1000) = -1.0;
+  expect_refused(indefinite, "baseline kernels, one negative diagonal entry", false, 1000);
+  Sparse nan = a;
+  nan.coeffRef(1500, 1501) = nan.coeffRef(1501, 1500) = std::numeric_limits<double>::quiet_NaN();
+  expect_refused(nan, "baseline kernels, NaN off the diagonal", true);
 }
 
 // The engine's wrappers: SparseCholesky says !ok(); Factorization throws FactorizationFailed

@@ -1,7 +1,9 @@
 // The CHOLMOD implementation of CholeskyFactor (SOFTSHELL_SPARSE_CHOLESKY=cholmod): CHOLMOD's
-// supernodal factor (simplicial when CHOLMOD finds that faster), its BLAS-based solves, and
-// sweeps of our own (supernodal_sweeps.h): forward over the supernodes local right-hand sides
-// reach, and whole sweeps on two threads over a large factor.
+// analysis (ordering, supernodes) and supernodal factor (simplicial when CHOLMOD finds that
+// faster), filled by our numeric factorization (supernodal_numeric.h; CHOLMOD's own for a
+// simplicial factor), its BLAS-based solves, and sweeps of our own (supernodal_sweeps.h): forward
+// over the supernodes local right-hand sides reach, and whole sweeps on two threads over a large
+// factor.
 #include "cholesky_factor.h"
 
 #include <atomic>
@@ -18,6 +20,7 @@
 #include <dlfcn.h>
 
 #include "softshell/result.h"
+#include "supernodal_numeric.h"
 #include "supernodal_sweeps.h"
 
 namespace softshell::engine::internal {
@@ -39,14 +42,13 @@ void configure(cholmod_common* c, size_t rows) {
   c->error_handler = nullptr;
   c->supernodal = CHOLMOD_AUTO;
   c->final_ll = 1;  // keep L L^T: the solve is two triangular sweeps
-  // A matrix that is not positive definite is refused at once: by default CHOLMOD assembles and
-  // factors the failing supernode again up to the failed column (a partial factor nobody here
-  // reads), and past a buckling load the failure is mostly in the last, largest separator
-  // (measured on a 9,075-DOF matrix failing there: 71 ms, what a success costs, instead of 78 ms).
+  // (Supernodal factors are filled by supernodal_numeric.h, which stops at the first failing
+  // supernode. Should CHOLMOD's own numeric factorization run one, it stops there too, instead of
+  // factoring that supernode again up to the failed column for a partial factor nobody reads.)
   c->quick_return_if_not_posdef = 1;
   // Supernodes amalgamated twice as far as CHOLMOD's defaults (4/16/48 columns, 80/10/5% zeros):
   // a shell's matrix has 3 x 3 blocks and small separators, and on fewer, larger supernodes the
-  // BLAS calls pay off. Measured on 2 cores: catmark_righthanded's factor 12.3-12.9 -> 6.9-8.2 ms,
+  // dense kernels pay off (measured with CHOLMOD's numeric factorization and BLAS). Measured on 2 cores: catmark_righthanded's factor 12.3-12.9 -> 6.9-8.2 ms,
   // spot_quadrangulated's 71-122 -> 63-91 ms, blub's unchanged; 10-18% more stored entries,
   // solves as fast. (Four times as far is slower on spot: 169-197 ms; docs/benchmarks.md.)
   c->nrelax[0] = 8;
@@ -205,16 +207,55 @@ Eigen::Index first_nonfinite_pivot(const cholmod_factor* l) {
   return find_on_diagonal(l, [](Eigen::Index, double d) { return !std::isfinite(d); });
 }
 
+// What a supernodal analysis gives every factor made from it: the layout's offsets (CHOLMOD's
+// ints widened), A's entries in the factor's order, and the plan for sweeps on two threads.
+struct SupernodalPlan {
+  std::vector<int32_t> supernode_of;  // per factor column
+  std::vector<int64_t> row_start, value_start;
+  FactorOrderEntries entries;
+  std::unique_ptr<const TwoThreadSweeps> sweeps;
+
+  SupernodalPlan(const cholmod_factor* l, const Eigen::SparseMatrix<double>& upper) {
+    const auto* super = static_cast<const int*>(l->super);
+    supernode_of.resize(l->n);
+    for (size_t s = 0; s < l->nsuper; ++s) {
+      for (int col = super[s]; col < super[s + 1]; ++col) supernode_of[static_cast<size_t>(col)] = static_cast<int32_t>(s);
+    }
+    row_start.assign(static_cast<const int*>(l->pi), static_cast<const int*>(l->pi) + l->nsuper + 1);
+    value_start.assign(static_cast<const int*>(l->px), static_cast<const int*>(l->px) + l->nsuper + 1);
+    std::vector<int32_t> position(l->n);
+    const auto* perm = static_cast<const int*>(l->Perm);
+    for (size_t k = 0; k < l->n; ++k) position[static_cast<size_t>(perm ? perm[k] : static_cast<int>(k))] = static_cast<int32_t>(k);
+    entries = factor_order_entries(upper, position);
+    sweeps = TwoThreadSweeps::plan(layout(l));
+  }
+  // The layout of l, a factor of this analysis.
+  SupernodalLayout layout(const cholmod_factor* l) const {
+    SupernodalLayout out;
+    out.supernodes = static_cast<int64_t>(l->nsuper);
+    out.first = static_cast<const int*>(l->super);
+    out.row_start = row_start.data();
+    out.value_start = value_start.data();
+    out.rows = static_cast<const int*>(l->s);
+    out.supernode_of = supernode_of.data();
+    out.values = static_cast<const double*>(l->x);
+    return out;
+  }
+  size_t bytes() const {
+    return (supernode_of.size() + entries.row.size() + entries.value.size()) * sizeof(int32_t) +
+           (row_start.size() + value_start.size() + entries.start.size()) * sizeof(int64_t) +
+           (sweeps ? sweeps->bytes() : 0);
+  }
+};
+
 }  // namespace
 
 struct CholeskyFactor::State {
   cholmod_factor* l = nullptr;
   uint64_t analysis = 0;  // which analysis l is of (SpareFactors)
-  // A supernodal factor's layout (CHOLMOD's int offsets widened), and its two-thread plan.
-  std::vector<int32_t> supernode_of;  // per factor column
-  std::vector<int64_t> row_start, value_start;
+  std::shared_ptr<const SupernodalPlan> plan;  // a supernodal factor's, shared by its analysis' factors
   SupernodalLayout layout;
-  std::unique_ptr<const TwoThreadSweeps> sweeps;
+  const TwoThreadSweeps* sweeps() const { return plan ? plan->sweeps.get() : nullptr; }
   ~State() {
     if (l) g_spare_factors.keep(analysis, l);
   }
@@ -256,20 +297,49 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
   // A factor of the same analysis carries its ordering and supernodes: factorizing into it skips
   // the analysis. A kept one (SpareFactors) is refactored in place, else a copy is made.
   cholmod_factor* l = same_pattern ? g_spare_factors.take(analysis) : nullptr;
-  bool ok = false;
   {
     const auto turn = blas_turn();
     configure(c, a.nrow);
     if (!l) l = same_pattern ? cholmod_copy_factor(same_pattern->state_->l, c) : cholmod_analyze(&a, c);
-    ok = l && cholmod_factorize(&a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
   }
-  // CHOLMOD stops at a pivot that is not positive but passes NaN through (simplicial: NaN <= 0
-  // is false); a non-finite value anywhere in L reaches a later pivot (L_kk^2 = A_kk - sum of
-  // squares of row k), so the pivots tell.
+  if (!l) {
+    failure.out_of_memory = c->status == CHOLMOD_OUT_OF_MEMORY;
+    return nullptr;
+  }
+  auto state = std::make_unique<State>();
+  state->analysis = analysis;
+  bool ok = false;
+  if (l->is_super) {
+    // Ours (supernodal_numeric.h): into CHOLMOD's layout, given its values (a symbolic factor
+    // fresh from the analysis has none yet).
+    try {
+      state->plan = same_pattern && same_pattern->state_->plan ? same_pattern->state_->plan
+                                                               : std::make_shared<const SupernodalPlan>(l, upper);
+      ok = l->xtype == CHOLMOD_REAL || cholmod_change_factor(CHOLMOD_REAL, 1, 1, 1, 1, l, c);
+      if (ok) {
+        const SupernodalOutcome outcome =
+            factor_supernodes(state->plan->layout(l), state->plan->entries, upper.valuePtr(), static_cast<double*>(l->x));
+        l->is_ll = 1;
+        l->minor = outcome.failed_column >= 0 ? static_cast<size_t>(outcome.failed_column) : l->n;
+        ok = outcome.failed_column < 0;
+        failure.not_finite = outcome.not_finite;
+      } else {
+        failure.out_of_memory = c->status == CHOLMOD_OUT_OF_MEMORY;
+      }
+    } catch (const std::bad_alloc&) {
+      failure.out_of_memory = true;
+    }
+  } else {
+    const auto turn = blas_turn();
+    ok = cholmod_factorize(&a, l, c) && c->status == CHOLMOD_OK && l->minor == l->n;
+    failure.out_of_memory = c->status == CHOLMOD_OUT_OF_MEMORY;
+  }
+  // A pivot that is not positive stops either factorization, but NaN can pass CHOLMOD's
+  // (simplicial: NaN <= 0 is false); a non-finite value anywhere in L reaches a later pivot
+  // (L_kk^2 = A_kk - sum of squares of row k), so the pivots tell.
   if (ok) {
     const Eigen::Index bad = first_nonfinite_pivot(l);
     if (bad >= 0) {
-      ok = false;
       failure.not_finite = true;
       const auto* perm = static_cast<const int*>(l->Perm);
       failure.column = perm ? perm[bad] : bad;
@@ -278,41 +348,19 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
     }
   }
   if (!ok) {
-    failure.out_of_memory = c->status == CHOLMOD_OUT_OF_MEMORY;
-    if (l && l->minor < l->n) {
+    if (l->minor < l->n) {
       const auto* perm = static_cast<const int*>(l->Perm);
       failure.column = perm ? perm[l->minor] : static_cast<Eigen::Index>(l->minor);
     }
-    if (l && failure.out_of_memory) {
+    if (failure.out_of_memory) {
       cholmod_free_factor(&l, c);
-    } else if (l) {
+    } else {
       g_spare_factors.keep(analysis, l);
     }
     return nullptr;
   }
-  auto state = std::make_unique<State>();
   state->l = l;
-  state->analysis = analysis;
-  if (l->is_super && l->xtype == CHOLMOD_REAL && l->dtype == CHOLMOD_DOUBLE) {
-    const auto* super = static_cast<const int*>(l->super);
-    const auto* pi = static_cast<const int*>(l->pi);
-    const auto* px = static_cast<const int*>(l->px);
-    state->supernode_of.resize(l->n);
-    for (size_t s = 0; s < l->nsuper; ++s) {
-      for (int col = super[s]; col < super[s + 1]; ++col) state->supernode_of[static_cast<size_t>(col)] = static_cast<int32_t>(s);
-    }
-    state->row_start.assign(pi, pi + l->nsuper + 1);
-    state->value_start.assign(px, px + l->nsuper + 1);
-    SupernodalLayout& layout = state->layout;
-    layout.supernodes = static_cast<int64_t>(l->nsuper);
-    layout.first = super;
-    layout.row_start = state->row_start.data();
-    layout.value_start = state->value_start.data();
-    layout.rows = static_cast<const int*>(l->s);
-    layout.supernode_of = state->supernode_of.data();
-    layout.values = static_cast<const double*>(l->x);
-    state->sweeps = TwoThreadSweeps::plan(layout);
-  }
+  if (state->plan) state->layout = state->plan->layout(l);
   return std::unique_ptr<CholeskyFactor>(new CholeskyFactor(std::move(state)));
 }
 
@@ -323,9 +371,8 @@ size_t CholeskyFactor::bytes() const {
   const size_t int_size = sizeof(int);
   size_t bytes = l->is_super ? l->xsize * sizeof(double) + l->ssize * int_size + (3 * l->nsuper + 3) * int_size
                              : l->nzmax * (sizeof(double) + int_size);
-  bytes += (state_->row_start.size() + state_->value_start.size()) * sizeof(int64_t);
-  if (state_->sweeps) bytes += state_->sweeps->bytes();
-  return bytes + 4 * l->n * int_size + state_->supernode_of.size() * sizeof(int32_t);
+  if (state_->plan) bytes += state_->plan->bytes();  // shared by its analysis' factors; counted with each
+  return bytes + 4 * l->n * int_size;
 }
 
 double CholeskyFactor::min_pivot() const {
@@ -387,22 +434,22 @@ bool CholeskyFactor::State::own_forward(const Eigen::MatrixXd& rhs, Eigen::Matri
   // that one of them updates.
   std::vector<char> reached(static_cast<size_t>(layout.supernodes), 0);
   for (Eigen::Index k = 0; k < n; ++k) {
-    if (!rhs.row(perm ? perm[k] : k).isZero(0.0)) reached[static_cast<size_t>(supernode_of[static_cast<size_t>(k)])] = 1;
+    if (!rhs.row(perm ? perm[k] : k).isZero(0.0)) reached[static_cast<size_t>(layout.supernode_of[k])] = 1;
   }
-  const ForwardSweep plan = plan_forward(layout, sweeps.get(), executor, reached);
-  if (plan.whole && !plan.two_threads) return false;
+  const ForwardSweep route = plan_forward(layout, sweeps(), executor, reached);
+  if (route.whole && !route.two_threads) return false;
   x.resize(n, rhs.cols());
   for (Eigen::Index k = 0; k < n; ++k) x.row(k) = rhs.row(perm ? perm[k] : k);
-  if (plan.two_threads) {
-    const std::vector<char>* only = plan.whole ? nullptr : &reached;
-    by_columns(x, [&](auto& xs) { sweeps->forward(layout, xs, *executor, only); });
-    fraction_read = plan.whole ? 1.0 : static_cast<double>(plan.work) / static_cast<double>(layout.entries());
+  if (route.two_threads) {
+    const std::vector<char>* only = route.whole ? nullptr : &reached;
+    by_columns(x, [&](auto& xs) { sweeps()->forward(layout, xs, *executor, only); });
+    fraction_read = route.whole ? 1.0 : static_cast<double>(route.work) / static_cast<double>(layout.entries());
     return true;
   }
   for (int64_t s = 0; s < layout.supernodes; ++s) {
     if (reached[static_cast<size_t>(s)]) forward_step(layout, s, x);
   }
-  fraction_read = static_cast<double>(plan.work) / static_cast<double>(layout.entries());
+  fraction_read = static_cast<double>(route.work) / static_cast<double>(layout.entries());
   return true;
 }
 
@@ -415,11 +462,11 @@ Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* frac
 }
 
 Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* executor) const {
-  if (!on_two_threads(state_->sweeps.get(), executor) || y.cols() == 0) {
+  if (!on_two_threads(state_->sweeps(), executor) || y.cols() == 0) {
     return state_->apply(CHOLMOD_Pt, state_->apply(CHOLMOD_Lt, y));
   }
   Eigen::MatrixXd x = y;
-  by_columns(x, [&](auto& xs) { state_->sweeps->backward(state_->layout, xs, *executor); });
+  by_columns(x, [&](auto& xs) { state_->sweeps()->backward(state_->layout, xs, *executor); });
   const auto* perm = static_cast<const int*>(state_->l->Perm);
   if (!perm) return x;
   Eigen::MatrixXd out(x.rows(), x.cols());
@@ -427,6 +474,6 @@ Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* exe
   return out;
 }
 
-bool CholeskyFactor::two_thread_sweeps() const { return state_->sweeps != nullptr; }
+bool CholeskyFactor::two_thread_sweeps() const { return state_->sweeps() != nullptr; }
 
 }  // namespace softshell::engine::internal

@@ -1,6 +1,7 @@
 // The GPL-free implementation of CholeskyFactor (SOFTSHELL_SPARSE_CHOLESKY=eigen): a supernodal
 // left-looking L L^T on Eigen's approximate-minimum-degree ordering, written here on Eigen's dense
-// kernels. Only MPL-2.0 Eigen headers are used (EIGEN_MPL2_ONLY makes the compiler refuse any
+// kernels (the symbolic analysis here; the numeric factorization, which the CHOLMOD build runs
+// too, in supernodal_numeric.h). Only MPL-2.0 Eigen headers are used (EIGEN_MPL2_ONLY makes the compiler refuse any
 // other); no BLAS, no SuiteSparse.
 //
 // Why not Eigen's SimplicialLLT: a simplicial (column-by-column, scalar) factorization measured
@@ -12,7 +13,7 @@
 // supernode a dense column-major block: its columns' rows, diagonal block first), so the sweeps
 // are the ones both backends share (supernodal_sweeps.h).
 //
-// File length: ~510 lines, one algorithm (symbolic analysis, numeric factorization).
+// File length: ~400 lines: the symbolic analysis, the factor's state and its sweeps.
 #ifndef EIGEN_MPL2_ONLY
 #define EIGEN_MPL2_ONLY
 #endif
@@ -24,9 +25,9 @@
 #include <new>
 #include <vector>
 
-#include <Eigen/Cholesky>
 #include <Eigen/OrderingMethods>
 
+#include "supernodal_numeric.h"
 #include "supernodal_sweeps.h"
 
 namespace softshell::engine::internal {
@@ -34,9 +35,6 @@ namespace softshell::engine::internal {
 std::atomic<size_t> g_spare_factor_bytes{8u << 20};  // the CHOLMOD build's (cholesky_factor.h)
 
 namespace {
-
-using Block = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
-using ConstBlock = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
 
 // Supernodes are merged with their parent while the merged block stays small or mostly nonzero
 // (CHOLMOD's defaults): up to 4 columns always, up to 16 with < 80% explicit zeros, up to 48
@@ -55,13 +53,15 @@ struct Symbolic {
   // block at value_start[s].
   std::vector<int32_t> first, supernode_of, rows;
   std::vector<int64_t> row_start, value_start;
-  size_t max_update = 0;  // largest update block a descendant makes (rows x columns)
+  FactorOrderEntries entries;  // A's entries in the factor's order
   std::unique_ptr<const TwoThreadSweeps> sweeps;  // the plan for sweeps on two threads, if any
 
   size_t supernodes() const { return first.size() - 1; }
   size_t bytes() const {
-    return (position.size() + original.size() + first.size() + supernode_of.size() + rows.size()) * sizeof(int32_t) +
-           (row_start.size() + value_start.size()) * sizeof(int64_t) + sizeof(Symbolic) + (sweeps ? sweeps->bytes() : 0);
+    return (position.size() + original.size() + first.size() + supernode_of.size() + rows.size() +
+            entries.row.size() + entries.value.size()) * sizeof(int32_t) +
+           (row_start.size() + value_start.size() + entries.start.size()) * sizeof(int64_t) + sizeof(Symbolic) +
+           (sweeps ? sweeps->bytes() : 0);
   }
 };
 
@@ -146,40 +146,6 @@ std::vector<int32_t> elimination_tree(const std::vector<int64_t>& start, const s
     }
   }
   return parent;
-}
-
-// P A P^T's lower triangle by columns, for the ordering `position`: row `row[q]`, value
-// A.valuePtr()[value[q]] (A given by its upper triangle).
-struct LowerEntries {
-  std::vector<int64_t> start;
-  std::vector<int32_t> row, value;
-};
-
-LowerEntries lower_entries(const Eigen::SparseMatrix<double>& upper, const std::vector<int32_t>& position) {
-  const auto n = static_cast<size_t>(upper.rows());
-  LowerEntries a;
-  a.start.assign(n + 1, 0);
-  for (Eigen::Index j = 0; j < upper.cols(); ++j) {
-    for (int p = upper.outerIndexPtr()[j]; p < upper.outerIndexPtr()[j + 1]; ++p) {
-      if (upper.innerIndexPtr()[p] > j) continue;
-      const int32_t pi = position[static_cast<size_t>(upper.innerIndexPtr()[p])], pj = position[static_cast<size_t>(j)];
-      ++a.start[static_cast<size_t>(std::min(pi, pj)) + 1];
-    }
-  }
-  for (size_t k = 0; k < n; ++k) a.start[k + 1] += a.start[k];
-  a.row.resize(static_cast<size_t>(a.start[n]));
-  a.value.resize(static_cast<size_t>(a.start[n]));
-  std::vector<int64_t> next(a.start.begin(), a.start.end() - 1);
-  for (Eigen::Index j = 0; j < upper.cols(); ++j) {
-    for (int p = upper.outerIndexPtr()[j]; p < upper.outerIndexPtr()[j + 1]; ++p) {
-      if (upper.innerIndexPtr()[p] > j) continue;
-      const int32_t pi = position[static_cast<size_t>(upper.innerIndexPtr()[p])], pj = position[static_cast<size_t>(j)];
-      const auto q = static_cast<size_t>(next[static_cast<size_t>(std::min(pi, pj))]++);
-      a.row[q] = std::max(pi, pj);
-      a.value[q] = p;
-    }
-  }
-  return a;
 }
 
 std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper) {
@@ -274,7 +240,8 @@ std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper
     for (int32_t j = s->first[t]; j < s->first[t + 1]; ++j) s->supernode_of[static_cast<size_t>(j)] = static_cast<int32_t>(t);
   }
 
-  const LowerEntries a = lower_entries(upper, s->position);
+  s->entries = factor_order_entries(upper, s->position);
+  const FactorOrderEntries& a = s->entries;
 
   // Each supernode's rows: its columns, then A's rows below them and its children's rows below
   // them (a child: a supernode whose first row below its own columns falls in this one).
@@ -311,18 +278,6 @@ std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper
       child_head[p] = static_cast<int32_t>(t);
     }
   }
-  // The largest update block: a descendant's rows from the first in a supernode's columns down.
-  for (size_t t = 0; t < ns; ++t) {
-    const int64_t own = s->first[t + 1] - s->first[t];
-    const int64_t nrows = s->row_start[t + 1] - s->row_start[t];
-    for (int64_t p = s->row_start[t] + own; p < s->row_start[t + 1];) {
-      const int32_t target = s->supernode_of[static_cast<size_t>(s->rows[static_cast<size_t>(p)])];
-      int64_t in_target = 0;
-      const int64_t from = p;
-      while (p < s->row_start[t + 1] && s->supernode_of[static_cast<size_t>(s->rows[static_cast<size_t>(p)])] == target) ++p, ++in_target;
-      s->max_update = std::max(s->max_update, static_cast<size_t>((s->row_start[t] + nrows - from) * in_target));
-    }
-  }
   s->rows.shrink_to_fit();
   s->sweeps = TwoThreadSweeps::plan(layout(*s, nullptr));
   return s;
@@ -351,81 +306,15 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
                           ? same_pattern->state_->symbolic
                           : analyze(upper);
     const Symbolic& s = *state->symbolic;
-    const size_t ns = s.supernodes();
-    state->values.assign(static_cast<size_t>(s.value_start.back()), 0.0);
-    double* values = state->values.data();
-    const double* ax = upper.valuePtr();
-    const LowerEntries a = lower_entries(upper, s.position);
-
-    // Left-looking: supernode t gathers the updates of every descendant d with rows in t's
-    // columns (d waits in t's list, `head`, until then; `next_row` is where d's rows in t begin),
-    // then factors its diagonal block and solves for the rows below it.
-    std::vector<int32_t> head(ns, -1), link(ns, -1), map(static_cast<size_t>(s.n), 0);
-    std::vector<int64_t> next_row(ns, 0);
-    Eigen::VectorXd update_storage(static_cast<Eigen::Index>(s.max_update));
-    double low = std::numeric_limits<double>::infinity();
-    for (size_t t = 0; t < ns; ++t) {
-      const int32_t k1 = s.first[t], k2 = s.first[t + 1];
-      const Eigen::Index ncols = k2 - k1, nrows = s.row_start[t + 1] - s.row_start[t];
-      const int32_t* rows = s.rows.data() + s.row_start[t];
-      for (Eigen::Index i = 0; i < nrows; ++i) map[static_cast<size_t>(rows[i])] = static_cast<int32_t>(i);
-      Block lt(values + s.value_start[t], nrows, ncols, Eigen::OuterStride<>(nrows));
-      for (int32_t j = k1; j < k2; ++j) {
-        for (int64_t q = a.start[static_cast<size_t>(j)]; q < a.start[static_cast<size_t>(j) + 1]; ++q) {
-          lt(map[static_cast<size_t>(a.row[static_cast<size_t>(q)])], j - k1) += ax[a.value[static_cast<size_t>(q)]];
-        }
-      }
-      for (int32_t d = head[t]; d >= 0;) {
-        const auto ds = static_cast<size_t>(d);
-        const int32_t d_next = link[ds];
-        const Eigen::Index d_rows = s.row_start[ds + 1] - s.row_start[ds], d_cols = s.first[ds + 1] - s.first[ds];
-        const int32_t* drow = s.rows.data() + s.row_start[ds];
-        const int64_t from = next_row[ds];
-        int64_t to = from;
-        while (to < d_rows && drow[to] < k2) ++to;
-        const Eigen::Index m1 = to - from, m2 = d_rows - from;  // rows in t's columns; rows from there down
-        const ConstBlock ld(values + s.value_start[ds] + from, m2, d_cols, Eigen::OuterStride<>(d_rows));
-        Eigen::Map<Eigen::MatrixXd> c(update_storage.data(), m2, m1);
-        c.noalias() = ld * ld.topRows(m1).transpose();
-        for (Eigen::Index jj = 0; jj < m1; ++jj) {
-          const Eigen::Index col = drow[from + jj] - k1;
-          for (Eigen::Index ii = jj; ii < m2; ++ii) lt(map[static_cast<size_t>(drow[from + ii])], col) -= c(ii, jj);
-        }
-        next_row[ds] = to;
-        if (to < d_rows) {  // d's next rows are in a later supernode: wait there
-          const auto target = static_cast<size_t>(s.supernode_of[static_cast<size_t>(drow[to])]);
-          link[ds] = head[target];
-          head[target] = d;
-        }
-        d = d_next;
-      }
-      head[t] = -1;
-      auto diagonal = lt.topRows(ncols);
-      const Eigen::Index bad = Eigen::internal::llt_inplace<double, Eigen::Lower>::blocked(diagonal);
-      // Eigen's LLT stops at a pivot that is not positive but passes NaN through; a non-finite
-      // value anywhere reaches a later pivot (L_kk^2 = A_kk - sum of squares of row k).
-      Eigen::Index column = bad;
-      if (column < 0) {
-        for (Eigen::Index j = 0; j < ncols && column < 0; ++j) {
-          if (!std::isfinite(diagonal(j, j))) column = j;
-        }
-        failure.not_finite = column >= 0;
-      }
-      if (column >= 0) {
-        failure.column = s.original[static_cast<size_t>(k1 + column)];
-        return nullptr;
-      }
-      low = std::min(low, diagonal.diagonal().minCoeff());
-      if (nrows > ncols) {
-        auto below = lt.bottomRows(nrows - ncols);
-        diagonal.triangularView<Eigen::Lower>().transpose().solveInPlace<Eigen::OnTheRight>(below);
-        next_row[t] = ncols;
-        const auto target = static_cast<size_t>(s.supernode_of[static_cast<size_t>(rows[ncols])]);
-        link[t] = head[target];
-        head[target] = static_cast<int32_t>(t);
-      }
+    state->values.resize(static_cast<size_t>(s.value_start.back()));
+    const SupernodalOutcome outcome =
+        factor_supernodes(layout(s, nullptr), s.entries, upper.valuePtr(), state->values.data());
+    if (outcome.failed_column >= 0) {
+      failure.column = s.original[static_cast<size_t>(outcome.failed_column)];
+      failure.not_finite = outcome.not_finite;
+      return nullptr;
     }
-    state->min_pivot = low * low;
+    state->min_pivot = outcome.min_diagonal * outcome.min_diagonal;
     return std::unique_ptr<CholeskyFactor>(new CholeskyFactor(std::move(state)));
   } catch (const std::bad_alloc&) {
     failure.out_of_memory = true;

@@ -26,25 +26,9 @@
 #include <Eigen/Core>
 
 #include "softshell/executor.h"
+#include "supernodal_layout.h"
 
 namespace softshell::engine::internal {
-
-/// A supernodal factor as both backends store it (views; the owner keeps the arrays alive).
-/// Supernode s holds columns first[s] .. first[s + 1] - 1; its rows (its own columns first, then
-/// the rows below, ascending) are rows[row_start[s] .. row_start[s + 1]); its values are a
-/// column-major block (rows x columns) at values + value_start[s].
-struct SupernodalLayout {
-  int64_t supernodes = 0;
-  const int32_t* first = nullptr;
-  const int64_t* row_start = nullptr;
-  const int64_t* value_start = nullptr;
-  const int32_t* rows = nullptr;
-  const int32_t* supernode_of = nullptr;  // per column
-  const double* values = nullptr;
-
-  int64_t columns() const { return supernodes > 0 ? first[supernodes] : 0; }
-  int64_t entries() const { return supernodes > 0 ? value_start[supernodes] : 0; }
-};
 
 /// Factors with fewer stored entries are swept on one thread (1M entries, 8 MB: about 1 ms a sweep
 /// here, where a second thread's wake-up and the top's gathering start to pay), and so are

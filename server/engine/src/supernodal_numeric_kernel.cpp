@@ -1,0 +1,107 @@
+// The numeric supernodal factorization's kernel (supernodal_numeric.h). CMake compiles this file
+// twice: as it is (the baseline) and, with SOFTSHELL_KERNEL_X86_64_V3, for x86-64-v3 (AVX2, FMA:
+// the dense blocks' products and the diagonal factorizations twice as fast). That copy gets its
+// own name for Eigen's namespace, so that none of its template instances (AVX2 code) can stand in
+// for the baseline's at link time; only the plain-typed entry point is shared.
+#ifndef EIGEN_MPL2_ONLY
+#define EIGEN_MPL2_ONLY  // the GPL-free build uses this file too
+#endif
+#ifdef SOFTSHELL_KERNEL_X86_64_V3
+#define Eigen softshell_eigen_x86_64_v3
+#define SOFTSHELL_KERNEL_ENTRY factor_x86_64_v3
+#else
+#define SOFTSHELL_KERNEL_ENTRY factor_baseline
+#endif
+
+#include "supernodal_numeric_kernel.h"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
+namespace softshell::engine::internal::supernodal_kernel {
+
+using Block = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
+using ConstBlock = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
+
+// Left-looking: supernode t gathers the updates of every descendant d with rows in t's columns
+// (d waits in t's list, `head`, until then; `next_row` is where d's rows in t begin), then factors
+// its diagonal block and solves for the rows below it.
+SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const int64_t* start, const int32_t* row,
+                                         const int32_t* value, const double* a_values, double* values) {
+  SupernodalOutcome outcome;
+  const auto ns = static_cast<size_t>(l.supernodes);
+  std::vector<int32_t> head(ns, -1), link(ns, -1), map(static_cast<size_t>(l.columns()), 0);
+  std::vector<int64_t> next_row(ns, 0);
+  std::vector<double> update;  // the largest descendant update so far
+  double low = std::numeric_limits<double>::infinity();
+  for (size_t t = 0; t < ns; ++t) {
+    const int32_t k1 = l.first[t], k2 = l.first[t + 1];
+    const Eigen::Index ncols = k2 - k1, nrows = l.row_start[t + 1] - l.row_start[t];
+    const int32_t* rows = l.rows + l.row_start[t];
+    for (Eigen::Index i = 0; i < nrows; ++i) map[static_cast<size_t>(rows[i])] = static_cast<int32_t>(i);
+    double* block = values + l.value_start[t];
+    std::fill(block, block + nrows * ncols, 0.0);
+    Block lt(block, nrows, ncols, Eigen::OuterStride<>(nrows));
+    for (int32_t j = k1; j < k2; ++j) {
+      for (int64_t q = start[j]; q < start[j + 1]; ++q) lt(map[static_cast<size_t>(row[q])], j - k1) += a_values[value[q]];
+    }
+    for (int32_t d = head[t]; d >= 0;) {
+      const auto ds = static_cast<size_t>(d);
+      const int32_t d_next = link[ds];
+      const Eigen::Index d_rows = l.row_start[ds + 1] - l.row_start[ds], d_cols = l.first[ds + 1] - l.first[ds];
+      const int32_t* drow = l.rows + l.row_start[ds];
+      const int64_t from = next_row[ds];
+      int64_t to = from;
+      while (to < d_rows && drow[to] < k2) ++to;
+      const Eigen::Index m1 = to - from, m2 = d_rows - from;  // rows in t's columns; rows from there down
+      const ConstBlock ld(values + l.value_start[ds] + from, m2, d_cols, Eigen::OuterStride<>(d_rows));
+      if (update.size() < static_cast<size_t>(m2 * m1)) update.resize(static_cast<size_t>(m2 * m1));
+      Eigen::Map<Eigen::MatrixXd> c(update.data(), m2, m1);
+      c.noalias() = ld * ld.topRows(m1).transpose();
+      for (Eigen::Index jj = 0; jj < m1; ++jj) {
+        const Eigen::Index col = drow[from + jj] - k1;
+        for (Eigen::Index ii = jj; ii < m2; ++ii) lt(map[static_cast<size_t>(drow[from + ii])], col) -= c(ii, jj);
+      }
+      next_row[ds] = to;
+      if (to < d_rows) {  // d's next rows are in a later supernode: wait there
+        const auto target = static_cast<size_t>(l.supernode_of[drow[to]]);
+        link[ds] = head[target];
+        head[target] = d;
+      }
+      d = d_next;
+    }
+    head[t] = -1;
+    auto diagonal = lt.topRows(ncols);
+    const Eigen::Index bad = Eigen::internal::llt_inplace<double, Eigen::Lower>::blocked(diagonal);
+    // Eigen's LLT stops at a pivot that is not positive but passes NaN through; a non-finite
+    // value anywhere reaches a later pivot (L_kk^2 = A_kk - sum of squares of row k).
+    Eigen::Index column = bad;
+    if (column < 0) {
+      for (Eigen::Index j = 0; j < ncols && column < 0; ++j) {
+        if (!std::isfinite(diagonal(j, j))) column = j;
+      }
+      outcome.not_finite = column >= 0;
+    }
+    if (column >= 0) {
+      outcome.failed_column = k1 + column;
+      return outcome;
+    }
+    low = std::min(low, diagonal.diagonal().minCoeff());
+    if (nrows > ncols) {
+      auto below = lt.bottomRows(nrows - ncols);
+      diagonal.triangularView<Eigen::Lower>().transpose().solveInPlace<Eigen::OnTheRight>(below);
+      next_row[t] = ncols;
+      const auto target = static_cast<size_t>(l.supernode_of[rows[ncols]]);
+      link[t] = head[target];
+      head[target] = static_cast<int32_t>(t);
+    }
+  }
+  outcome.min_diagonal = low;
+  return outcome;
+}
+
+}  // namespace softshell::engine::internal::supernodal_kernel
