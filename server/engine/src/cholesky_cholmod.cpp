@@ -208,14 +208,14 @@ Eigen::Index first_nonfinite_pivot(const cholmod_factor* l) {
 }
 
 // What a supernodal analysis gives every factor made from it: the layout's offsets (CHOLMOD's
-// ints widened), A's entries in the factor's order, and the plan for sweeps on two threads.
+// ints widened), the ordering, and the plan for sweeps on two threads.
 struct SupernodalPlan {
   std::vector<int32_t> supernode_of;  // per factor column
   std::vector<int64_t> row_start, value_start;
-  FactorOrderEntries entries;
+  std::vector<int32_t> position;  // position[i]: where row i of A is in the factor
   std::unique_ptr<const TwoThreadSweeps> sweeps;
 
-  SupernodalPlan(const cholmod_factor* l, const Eigen::SparseMatrix<double>& upper) {
+  explicit SupernodalPlan(const cholmod_factor* l) {
     const auto* super = static_cast<const int*>(l->super);
     supernode_of.resize(l->n);
     for (size_t s = 0; s < l->nsuper; ++s) {
@@ -223,10 +223,9 @@ struct SupernodalPlan {
     }
     row_start.assign(static_cast<const int*>(l->pi), static_cast<const int*>(l->pi) + l->nsuper + 1);
     value_start.assign(static_cast<const int*>(l->px), static_cast<const int*>(l->px) + l->nsuper + 1);
-    std::vector<int32_t> position(l->n);
+    position.resize(l->n);
     const auto* perm = static_cast<const int*>(l->Perm);
     for (size_t k = 0; k < l->n; ++k) position[static_cast<size_t>(perm ? perm[k] : static_cast<int>(k))] = static_cast<int32_t>(k);
-    entries = factor_order_entries(upper, position);
     sweeps = TwoThreadSweeps::plan(layout(l));
   }
   // The layout of l, a factor of this analysis.
@@ -242,9 +241,8 @@ struct SupernodalPlan {
     return out;
   }
   size_t bytes() const {
-    return (supernode_of.size() + entries.row.size() + entries.value.size()) * sizeof(int32_t) +
-           (row_start.size() + value_start.size() + entries.start.size()) * sizeof(int64_t) +
-           (sweeps ? sweeps->bytes() : 0);
+    return (supernode_of.size() + position.size()) * sizeof(int32_t) +
+           (row_start.size() + value_start.size()) * sizeof(int64_t) + (sweeps ? sweeps->bytes() : 0);
   }
 };
 
@@ -314,11 +312,12 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
     // fresh from the analysis has none yet).
     try {
       state->plan = same_pattern && same_pattern->state_->plan ? same_pattern->state_->plan
-                                                               : std::make_shared<const SupernodalPlan>(l, upper);
+                                                               : std::make_shared<const SupernodalPlan>(l);
       ok = l->xtype == CHOLMOD_REAL || cholmod_change_factor(CHOLMOD_REAL, 1, 1, 1, 1, l, c);
       if (ok) {
         const SupernodalOutcome outcome =
-            factor_supernodes(state->plan->layout(l), state->plan->entries, upper.valuePtr(), static_cast<double*>(l->x));
+            factor_supernodes(state->plan->layout(l), factor_order_entries(upper, state->plan->position),
+                              upper.valuePtr(), static_cast<double*>(l->x));
         l->is_ll = 1;
         l->minor = outcome.failed_column >= 0 ? static_cast<size_t>(outcome.failed_column) : l->n;
         ok = outcome.failed_column < 0;

@@ -53,15 +53,12 @@ struct Symbolic {
   // block at value_start[s].
   std::vector<int32_t> first, supernode_of, rows;
   std::vector<int64_t> row_start, value_start;
-  FactorOrderEntries entries;  // A's entries in the factor's order
   std::unique_ptr<const TwoThreadSweeps> sweeps;  // the plan for sweeps on two threads, if any
 
   size_t supernodes() const { return first.size() - 1; }
   size_t bytes() const {
-    return (position.size() + original.size() + first.size() + supernode_of.size() + rows.size() +
-            entries.row.size() + entries.value.size()) * sizeof(int32_t) +
-           (row_start.size() + value_start.size() + entries.start.size()) * sizeof(int64_t) + sizeof(Symbolic) +
-           (sweeps ? sweeps->bytes() : 0);
+    return (position.size() + original.size() + first.size() + supernode_of.size() + rows.size()) * sizeof(int32_t) +
+           (row_start.size() + value_start.size()) * sizeof(int64_t) + sizeof(Symbolic) + (sweeps ? sweeps->bytes() : 0);
   }
 };
 
@@ -240,8 +237,7 @@ std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper
     for (int32_t j = s->first[t]; j < s->first[t + 1]; ++j) s->supernode_of[static_cast<size_t>(j)] = static_cast<int32_t>(t);
   }
 
-  s->entries = factor_order_entries(upper, s->position);
-  const FactorOrderEntries& a = s->entries;
+  const FactorOrderEntries a = factor_order_entries(upper, s->position);
 
   // Each supernode's rows: its columns, then A's rows below them and its children's rows below
   // them (a child: a supernode whose first row below its own columns falls in this one).
@@ -308,7 +304,7 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
     const Symbolic& s = *state->symbolic;
     state->values.resize(static_cast<size_t>(s.value_start.back()));
     const SupernodalOutcome outcome =
-        factor_supernodes(layout(s, nullptr), s.entries, upper.valuePtr(), state->values.data());
+        factor_supernodes(layout(s, nullptr), factor_order_entries(upper, s.position), upper.valuePtr(), state->values.data());
     if (outcome.failed_column >= 0) {
       failure.column = s.original[static_cast<size_t>(outcome.failed_column)];
       failure.not_finite = outcome.not_finite;
