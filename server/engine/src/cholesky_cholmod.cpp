@@ -48,9 +48,11 @@ void configure(cholmod_common* c, size_t rows) {
   c->quick_return_if_not_posdef = 1;
   // Supernodes amalgamated twice as far as CHOLMOD's defaults (4/16/48 columns, 80/10/5% zeros):
   // a shell's matrix has 3 x 3 blocks and small separators, and on fewer, larger supernodes the
-  // dense kernels pay off (measured with CHOLMOD's numeric factorization and BLAS). Measured on 2 cores: catmark_righthanded's factor 12.3-12.9 -> 6.9-8.2 ms,
-  // spot_quadrangulated's 71-122 -> 63-91 ms, blub's unchanged; 10-18% more stored entries,
-  // solves as fast. (Four times as far is slower on spot: 169-197 ms; docs/benchmarks.md.)
+  // dense kernels pay off. Measured on 2 cores with CHOLMOD's numeric factorization:
+  // catmark_righthanded's factor 12.3-12.9 -> 6.9-8.2 ms, spot_quadrangulated's 71-122 -> 63-91
+  // ms, blub's unchanged; 10-18% more stored entries, solves as fast (four times as far: spot
+  // 169-197 ms). With ours (supernodal_numeric.h), four times as far was slower on
+  // catmark_righthanded's tangent too (9.1-9.4 against 6.9-7.9 ms; docs/benchmarks.md).
   c->nrelax[0] = 8;
   c->nrelax[1] = 32;
   c->nrelax[2] = 96;

@@ -1,8 +1,8 @@
 // The GPL-free implementation of CholeskyFactor (SOFTSHELL_SPARSE_CHOLESKY=eigen): a supernodal
-// left-looking L L^T on Eigen's approximate-minimum-degree ordering, written here on Eigen's dense
-// kernels (the symbolic analysis here; the numeric factorization, which the CHOLMOD build runs
-// too, in supernodal_numeric.h). Only MPL-2.0 Eigen headers are used (EIGEN_MPL2_ONLY makes the compiler refuse any
-// other); no BLAS, no SuiteSparse.
+// left-looking L L^T on Eigen's approximate-minimum-degree ordering, on Eigen's dense kernels: the
+// symbolic analysis here, the numeric factorization (which the CHOLMOD build runs too) in
+// supernodal_numeric.h. Only MPL-2.0 Eigen headers are used (EIGEN_MPL2_ONLY makes the compiler
+// refuse any other); no BLAS, no SuiteSparse.
 //
 // Why not Eigen's SimplicialLLT: a simplicial (column-by-column, scalar) factorization measured
 // 4-9x slower than CHOLMOD's supernodal one on the shipped meshes, and its sweeps 3-4x slower;
