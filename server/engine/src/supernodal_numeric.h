@@ -9,8 +9,8 @@
 // supernode pair and runs OpenMP regions; on small factors that overhead is most of its time. The
 // nonlinear model refactors its preconditioner at every drag step: catmark_righthanded's tangent
 // (1,245 DOFs) took 9-12 ms in CHOLMOD, 3.6 ms here. On large factors this is as fast or faster
-// (first linear solves: spot_quadrangulated 232 -> 208 ms, blub_quadrangulated 703 -> 599 ms;
-// docs/benchmarks.md). CHOLMOD still chooses the ordering (METIS for large matrices) and the
+// (first linear solves, interleaved: spot_quadrangulated 215-233 -> 161-169 ms,
+// blub_quadrangulated 767-916 -> 622-698 ms; docs/benchmarks.md). CHOLMOD still chooses the ordering (METIS for large matrices) and the
 // supernodes; its factor is filled here (a simplicial one, which CHOLMOD picks for very sparse
 // factors, by CHOLMOD).
 //
