@@ -145,7 +145,8 @@ std::vector<int32_t> elimination_tree(const std::vector<int64_t>& start, const s
   return parent;
 }
 
-std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper) {
+// The symbolic analysis of `upper`; `a` gets A's entries in the factor's order (which it reads).
+std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper, FactorOrderEntries& a) {
   auto s = std::make_shared<Symbolic>();
   const Eigen::Index n = upper.rows();
   const auto un = static_cast<size_t>(n);
@@ -237,7 +238,7 @@ std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper
     for (int32_t j = s->first[t]; j < s->first[t + 1]; ++j) s->supernode_of[static_cast<size_t>(j)] = static_cast<int32_t>(t);
   }
 
-  const FactorOrderEntries a = factor_order_entries(upper, s->position);
+  a = factor_order_entries(upper, s->position);
 
   // Each supernode's rows: its columns, then A's rows below them and its children's rows below
   // them (a child: a supernode whose first row below its own columns falls in this one).
@@ -298,13 +299,16 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
   try {
     auto state = std::make_unique<State>();
     const Symbolic* known = same_pattern ? same_pattern->state_->symbolic.get() : nullptr;
-    state->symbolic = known && known->n == upper.rows() && known->a_nonzeros == upper.nonZeros()
-                          ? same_pattern->state_->symbolic
-                          : analyze(upper);
+    FactorOrderEntries entries;
+    if (known && known->n == upper.rows() && known->a_nonzeros == upper.nonZeros()) {
+      state->symbolic = same_pattern->state_->symbolic;
+      entries = factor_order_entries(upper, known->position);
+    } else {
+      state->symbolic = analyze(upper, entries);
+    }
     const Symbolic& s = *state->symbolic;
     state->values.resize(static_cast<size_t>(s.value_start.back()));
-    const SupernodalOutcome outcome =
-        factor_supernodes(layout(s, nullptr), factor_order_entries(upper, s.position), upper.valuePtr(), state->values.data());
+    const SupernodalOutcome outcome = factor_supernodes(layout(s, nullptr), entries, upper.valuePtr(), state->values.data());
     if (outcome.failed_column >= 0) {
       failure.column = s.original[static_cast<size_t>(outcome.failed_column)];
       failure.not_finite = outcome.not_finite;
