@@ -2,7 +2,8 @@
  * (softshell_embedded_c.h): deleting a geometry (ss_session_remove_geometry: its results are gone,
  * the id is unknown, an upload of the same content continues the result ids); a persistent
  * embedded server (ss_embedded_options.data_dir: what was stored is there after the session is
- * destroyed and created again); result retention (keep_results). */
+ * destroyed and created again); result retention (keep_results); requests still running when
+ * the process exits are finished before it ends (their results are in the data directory). */
 
 #define _XOPEN_SOURCE 700 /* mkdtemp */
 #include <stdio.h>
@@ -185,10 +186,84 @@ static void retention(void) {
   ss_session_destroy(session);
 }
 
-int main(void) {
+enum { BIG_N = 40, BIG_NV = (BIG_N + 1) * (BIG_N + 1) };
+
+/* The child process of requests_finish_at_exit: uploads a larger plate and begins two
+ * deformations at once (they wait for the precomputation), destroys one operation and the session,
+ * leaves the other handle live as a careless host would, and returns from main at once. */
+static int exit_with_running_requests(const char* data_dir) {
+  ss_embedded_options options;
+  ss_embedded_options_default(&options);
+  options.data_dir = data_dir;
+  ss_session* session = NULL;
+  if (ss_session_create_embedded(&options, &session) != SS_OK) return 2;
+  ss_mesh* mesh = make_grid(BIG_N);
+  const ss_material material = {7.0e10, 0.3, 0.01, 2700.0};
+  ss_geom_id id;
+  int32_t created = -1;
+  if (ss_session_upload(session, mesh, &material, NULL, &id, &created) != SS_OK) return 3;
+  ss_request* request = NULL;
+  if (ss_request_create(&request) != SS_OK) return 4;
+  const ss_vec3 zero = {0, 0, 0}, down = {0, 0, -1.0};
+  const int32_t corners[4] = {0, BIG_N, BIG_N * (BIG_N + 1), BIG_NV - 1};
+  for (int c = 0; c < 4; ++c) ss_request_add_vertex_constraint(request, corners[c], 7, &zero);
+  ss_request_add_force(request, (BIG_N / 2) * (BIG_N + 1) + BIG_N / 2, &down);
+  ss_deformation* destroyed = NULL;
+  ss_deformation* left_live = NULL;
+  if (ss_session_deform_begin(session, &id, request, &destroyed) != SS_OK) return 5;
+  if (ss_session_deform_begin(session, &id, request, &left_live) != SS_OK) return 6;
+  ss_geometry_status status;
+  if (ss_session_geometry_status(session, &id, &status, NULL, 0) != SS_OK) return 7;
+  ss_deformation_destroy(destroyed);
+  ss_request_destroy(request);
+  ss_mesh_destroy(mesh);
+  ss_session_destroy(session);
+  if (status.status != SS_GEOMETRY_PRECOMPUTING) fprintf(stderr, "(precomputed before exit: a weaker test)\n");
+  return 0;
+}
+
+/* Exit waits for running requests: both deformations of the child are stored in its data
+ * directory, and the child exits normally (before, exit unloaded BLAS under a running solve). */
+static void requests_finish_at_exit(const char* self) {
+  char dir[] = "/tmp/softshell-c-exit-XXXXXX";
+  if (mkdtemp(dir) == NULL) {
+    CHECK(!"mkdtemp failed");
+    return;
+  }
+  char data_dir[sizeof dir + 8];
+  snprintf(data_dir, sizeof data_dir, "%s/store", dir);
+  char command[1024];
+  snprintf(command, sizeof command, "'%s' --exit-with-running-requests '%s'", self, data_dir);
+  const int child = system(command);
+  CHECK(child == 0);
+  if (child != 0) fprintf(stderr, "requests_finish_at_exit: the child returned %d\n", child);
+
+  ss_embedded_options options;
+  ss_embedded_options_default(&options);
+  options.data_dir = data_dir;
+  ss_session* session = NULL;
+  CHECK_OK(ss_session_create_embedded(&options, &session));
+  ss_mesh* mesh = make_grid(BIG_N);
+  const ss_material material = {7.0e10, 0.3, 0.01, 2700.0};
+  ss_geom_id id;
+  int32_t created = -1;
+  CHECK_OK(ss_session_upload(session, mesh, &material, NULL, &id, &created));
+  CHECK(created == 0);
+  ss_geometry_status status;
+  CHECK_OK(ss_session_geometry_status(session, &id, &status, NULL, 0));
+  CHECK(status.num_results == 2);
+  ss_mesh_destroy(mesh);
+  ss_session_destroy(session);
+  remove_store(data_dir);
+  CHECK(rmdir(dir) == 0);
+}
+
+int main(int argc, char** argv) {
+  if (argc == 3 && strcmp(argv[1], "--exit-with-running-requests") == 0) return exit_with_running_requests(argv[2]);
   remove_geometry();
   persistent_session();
   retention();
+  requests_finish_at_exit(argv[0]);
   printf("c_api_store_test: %d checks, %d failures\n", g_checks, g_failures);
   return g_failures == 0 ? 0 : 1;
 }

@@ -9,7 +9,9 @@
 // typed pointer of softshell_c.h (`ss_mesh*` ...), which C never dereferences (Vulkan's
 // non-dispatchable handles do the same), so C, C# (IntPtr) and Unreal code keep their signatures.
 
+#include <chrono>
 #include <cstdint>
+#include <functional>
 #include <future>
 #include <memory>
 #include <mutex>
@@ -56,11 +58,23 @@ struct HoldPutObject {
   bool ready() const { return future.wait_for(std::chrono::seconds(0)) == std::future_status::ready; }
 };
 
+/// Asynchronous requests still running when the process exits are waited for (up to a minute
+/// in all) by an atexit handler registered with the first one. It runs before the libraries'
+/// own teardown (BLAS frees its state at unload), so exit neither abandons a request mid-flight
+/// nor unloads what a running solve still uses. Every `*_begin` entry point calls this.
+void finish_before_exit(std::function<bool(std::chrono::steady_clock::time_point)> wait_until);
+template <class T>
+void finish_before_exit(const std::shared_future<T>& future) {
+  finish_before_exit([future](std::chrono::steady_clock::time_point deadline) {
+    return future.wait_until(deadline) == std::future_status::ready;
+  });
+}
+
 /// Asynchronous operations destroyed while running: kept (with their session) until they finish,
 /// so that destroying one never blocks (the last reference to a session would wait for its
 /// requests) and no request is abandoned mid-flight. Failures nobody read are logged as
 /// "<what(op)> destroyed before it was read failed: ...". One per operation kind, never destroyed
-/// (orphans may still finish during exit).
+/// (orphans finish during exit: see finish_before_exit).
 void log(int32_t level, std::string_view message) noexcept;  // (below)
 
 template <class Operation>

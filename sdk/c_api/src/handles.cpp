@@ -1,6 +1,11 @@
 // The handle table (c_api_internal.h): slot index + generation, checked on every call.
 
+#include <chrono>
+#include <cstdlib>
+#include <functional>
+#include <mutex>
 #include <string>
+#include <vector>
 
 #include "c_api_internal.h"
 
@@ -120,6 +125,46 @@ HandleTable& handles() {
   // Never destroyed: handles may be released from static destructors of the host.
   static auto* table = new HandleTable;
   return *table;
+}
+
+namespace {
+
+struct RunningRequests {
+  std::mutex mutex;
+  std::vector<std::function<bool(std::chrono::steady_clock::time_point)>> waits;  // true once done
+};
+
+RunningRequests& running_requests() {
+  static auto* requests = new RunningRequests;  // (never destroyed: used at exit)
+  return *requests;
+}
+
+void finish_running_requests() {
+  std::vector<std::function<bool(std::chrono::steady_clock::time_point)>> waits;
+  {
+    std::lock_guard lock(running_requests().mutex);
+    waits.swap(running_requests().waits);
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(1);
+  size_t abandoned = 0;
+  for (const auto& wait_until : waits) abandoned += wait_until(deadline) ? 0 : 1;
+  if (abandoned > 0) {
+    log(SS_LOG_WARNING, std::to_string(abandoned) + " asynchronous request(s) still running a minute after exit began " +
+                            "were abandoned; wait for operations before exiting to keep their results");
+  }
+}
+
+}  // namespace
+
+void finish_before_exit(std::function<bool(std::chrono::steady_clock::time_point)> wait_until) {
+  RunningRequests& requests = running_requests();
+  std::lock_guard lock(requests.mutex);
+  static const bool registered = std::atexit(finish_running_requests) == 0;
+  if (!registered) log(SS_LOG_WARNING, "could not register the wait for running requests at exit");
+  // Forget finished requests here, so the list holds only running ones.
+  const auto now = std::chrono::steady_clock::time_point::min();
+  std::erase_if(requests.waits, [&](const auto& done_by) { return done_by(now); });
+  requests.waits.push_back(std::move(wait_until));
 }
 
 }  // namespace softshell::c_api

@@ -48,6 +48,7 @@ ss_status ss_session_put_hold_begin(ss_session* session, const ss_geom_id* id, c
     op->hold_id = name;
     op->future = s->put_hold_async(geom_id(id), name, *req, std::chrono::milliseconds(ttl_ms)).share();
     if (!op->future.valid()) fail(ErrorCode::kInternal, "the session returned no future");
+    finish_before_exit(op->future);
     *out_operation = make_handle<ss_hold_put>(std::move(op));
   });
 }

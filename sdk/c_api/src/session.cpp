@@ -171,6 +171,7 @@ ss_status ss_session_deform_begin(ss_session* session, const ss_geom_id* id, con
     op->session = s;
     op->future = s->deform_async(geom_id(id), *req).share();
     if (!op->future.valid()) fail(ErrorCode::kInternal, "the session returned no future");
+    finish_before_exit(op->future);
     *out_operation = make_handle<ss_deformation>(std::move(op));
   });
 }

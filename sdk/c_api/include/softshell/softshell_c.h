@@ -492,7 +492,8 @@ SS_API ss_status ss_deformation_read(ss_deformation* operation, uint32_t* out_re
  *  model). Any output may be NULL. Status and message as in ss_deformation_read. */
 SS_API ss_status ss_deformation_read_model(ss_deformation* operation, int32_t* out_model, int32_t* out_iterations,
                                            double* out_residual);
-/** Releases the operation; never blocks (a running request finishes in the background). */
+/** Releases the operation; never blocks (a running request finishes in the background). A request
+ *  still running when the process exits is finished first: exit waits for it (up to a minute). */
 SS_API void ss_deformation_destroy(ss_deformation* operation);
 /** The newest result if newer than `have`; otherwise waits up to `wait_ms` for one. `*out_has_new`
  *  = 1 and the outputs filled if there is one, 0 otherwise. */
@@ -523,7 +524,8 @@ SS_API ss_status ss_hold_put_read(ss_hold_put* operation, uint32_t* out_res_id, 
 /** How the hold state of the answer was solved, as ss_deformation_read_model. */
 SS_API ss_status ss_hold_put_read_model(ss_hold_put* operation, int32_t* out_model, int32_t* out_iterations,
                                         double* out_residual);
-/** Releases the operation; never blocks (a running put finishes in the background). */
+/** Releases the operation; never blocks (a running put finishes in the background, and before
+ *  the process exits, as a deformation's). */
 SS_API void ss_hold_put_destroy(ss_hold_put* operation);
 /** Releases the hold and waits for the first result without it (`*out_res_id`, nullable).
  *  SS_NOT_FOUND for an unknown hold; SS_CONFLICT when the remaining holds cannot be solved (the
