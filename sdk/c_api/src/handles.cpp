@@ -159,11 +159,14 @@ void finish_running_requests() {
 void finish_before_exit(std::function<bool(std::chrono::steady_clock::time_point)> wait_until) {
   RunningRequests& requests = running_requests();
   std::lock_guard lock(requests.mutex);
-  static const bool registered = std::atexit(finish_running_requests) == 0;
-  if (!registered) log(SS_LOG_WARNING, "could not register the wait for running requests at exit");
+  [[maybe_unused]] static const bool registered = [] {
+    if (std::atexit(finish_running_requests) == 0) return true;
+    log(SS_LOG_WARNING, "could not register the wait for running requests at exit; exit may cut them short");
+    return false;
+  }();
   // Forget finished requests here, so the list holds only running ones.
-  const auto now = std::chrono::steady_clock::time_point::min();
-  std::erase_if(requests.waits, [&](const auto& done_by) { return done_by(now); });
+  const auto no_wait = std::chrono::steady_clock::time_point::min();
+  std::erase_if(requests.waits, [&](const auto& done_by) { return done_by(no_wait); });
   requests.waits.push_back(std::move(wait_until));
 }
 
