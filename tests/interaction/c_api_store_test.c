@@ -41,6 +41,15 @@ static uint32_t deform(ss_session* session, const ss_geom_id* id, double k) {
   return res_id;
 }
 
+/* Uploads an n x n grid of the test's material (the mesh is released again). */
+static ss_status upload_grid(ss_session* session, int n, ss_geom_id* id, int32_t* created) {
+  ss_mesh* mesh = make_grid(n);
+  const ss_material material = {7.0e10, 0.3, 0.01, 2700.0};
+  const ss_status status = ss_session_upload(session, mesh, &material, NULL, id, created);
+  ss_mesh_destroy(mesh);
+  return status;
+}
+
 static void remove_geometry(void) {
   ss_session* session = NULL;
   CHECK_OK(ss_session_create_embedded(NULL, &session));
@@ -168,11 +177,9 @@ static void retention(void) {
   options.result_budget_mb = 0;
   options.keep_results = 2;
   CHECK_OK(ss_session_create_embedded(&options, &session));
-  ss_mesh* mesh = make_grid(N);
-  const ss_material material = {7.0e10, 0.3, 0.01, 2700.0};
   ss_geom_id id;
   int32_t created = -1;
-  CHECK_OK(ss_session_upload(session, mesh, &material, NULL, &id, &created));
+  CHECK_OK(upload_grid(session, N, &id, &created));
   for (uint32_t k = 1; k <= 3; ++k) CHECK(deform(session, &id, (double)k) == k);
   ss_geometry_status status;
   CHECK_OK(ss_session_geometry_status(session, &id, &status, NULL, 0));
@@ -182,7 +189,6 @@ static void retention(void) {
   CHECK(strstr(ss_last_error_message(), "no longer kept") != NULL);
   CHECK_OK(ss_session_stresses(session, &id, 2, 1, NULL, 0, 0.0, &field));
   ss_stress_field_destroy(field);
-  ss_mesh_destroy(mesh);
   ss_session_destroy(session);
 }
 
@@ -197,11 +203,9 @@ static int exit_with_running_requests(const char* data_dir) {
   options.data_dir = data_dir;
   ss_session* session = NULL;
   if (ss_session_create_embedded(&options, &session) != SS_OK) return 2;
-  ss_mesh* mesh = make_grid(BIG_N);
-  const ss_material material = {7.0e10, 0.3, 0.01, 2700.0};
   ss_geom_id id;
   int32_t created = -1;
-  if (ss_session_upload(session, mesh, &material, NULL, &id, &created) != SS_OK) return 3;
+  if (upload_grid(session, BIG_N, &id, &created) != SS_OK) return 3;
   ss_request* request = NULL;
   if (ss_request_create(&request) != SS_OK) return 4;
   const ss_vec3 zero = {0, 0, 0}, down = {0, 0, -1.0};
@@ -216,7 +220,6 @@ static int exit_with_running_requests(const char* data_dir) {
   if (ss_session_geometry_status(session, &id, &status, NULL, 0) != SS_OK) return 7;
   ss_deformation_destroy(destroyed);
   ss_request_destroy(request);
-  ss_mesh_destroy(mesh);
   ss_session_destroy(session);
   if (status.status != SS_GEOMETRY_PRECOMPUTING) fprintf(stderr, "(precomputed before exit: a weaker test)\n");
   return 0;
@@ -243,16 +246,13 @@ static void requests_finish_at_exit(const char* self) {
   options.data_dir = data_dir;
   ss_session* session = NULL;
   CHECK_OK(ss_session_create_embedded(&options, &session));
-  ss_mesh* mesh = make_grid(BIG_N);
-  const ss_material material = {7.0e10, 0.3, 0.01, 2700.0};
   ss_geom_id id;
   int32_t created = -1;
-  CHECK_OK(ss_session_upload(session, mesh, &material, NULL, &id, &created));
+  CHECK_OK(upload_grid(session, BIG_N, &id, &created));
   CHECK(created == 0);
   ss_geometry_status status;
   CHECK_OK(ss_session_geometry_status(session, &id, &status, NULL, 0));
   CHECK(status.num_results == 2);
-  ss_mesh_destroy(mesh);
   ss_session_destroy(session);
   remove_store(data_dir);
   CHECK(rmdir(dir) == 0);
