@@ -18,20 +18,20 @@
 
 enum { N = 4, NV = (N + 1) * (N + 1) };
 
-/* The four corners pinned, a push down at the middle (scaled by k). */
-static ss_request* pinned_push(double k) {
+/* On an n x n grid: the four corners pinned, a push down at the middle (scaled by k). */
+static ss_request* pinned_push(int n, double k) {
   ss_request* request = NULL;
   CHECK_OK(ss_request_create(&request));
   const ss_vec3 zero = {0, 0, 0}, down = {0, 0, -0.25 * k};
-  const int32_t corners[4] = {0, N, N * (N + 1), NV - 1};
+  const int32_t corners[4] = {0, n, n * (n + 1), (n + 1) * (n + 1) - 1};
   for (int c = 0; c < 4; ++c) CHECK_OK(ss_request_add_vertex_constraint(request, corners[c], 7, &zero));
-  CHECK_OK(ss_request_add_force(request, (N / 2) * (N + 1) + N / 2, &down));
+  CHECK_OK(ss_request_add_force(request, (n / 2) * (n + 1) + n / 2, &down));
   return request;
 }
 
 /* Deforms and returns the stored result's id (0 on failure). */
 static uint32_t deform(ss_session* session, const ss_geom_id* id, double k) {
-  ss_request* request = pinned_push(k);
+  ss_request* request = pinned_push(N, k);
   double xyz[3 * NV];
   uint32_t res_id = 0;
   int32_t count = 0;
@@ -192,7 +192,7 @@ static void retention(void) {
   ss_session_destroy(session);
 }
 
-enum { BIG_N = 40, BIG_NV = (BIG_N + 1) * (BIG_N + 1) };
+enum { BIG_N = 40 };
 
 /* The child process of requests_finish_at_exit: uploads a larger plate and begins two
  * deformations at once (they wait for the precomputation), destroys one operation and the session,
@@ -206,12 +206,7 @@ static int exit_with_running_requests(const char* data_dir) {
   ss_geom_id id;
   int32_t created = -1;
   if (upload_grid(session, BIG_N, &id, &created) != SS_OK) return 3;
-  ss_request* request = NULL;
-  if (ss_request_create(&request) != SS_OK) return 4;
-  const ss_vec3 zero = {0, 0, 0}, down = {0, 0, -1.0};
-  const int32_t corners[4] = {0, BIG_N, BIG_N * (BIG_N + 1), BIG_NV - 1};
-  for (int c = 0; c < 4; ++c) ss_request_add_vertex_constraint(request, corners[c], 7, &zero);
-  ss_request_add_force(request, (BIG_N / 2) * (BIG_N + 1) + BIG_N / 2, &down);
+  ss_request* request = pinned_push(BIG_N, 4.0);
   ss_deformation* destroyed = NULL;
   ss_deformation* left_live = NULL;
   if (ss_session_deform_begin(session, &id, request, &destroyed) != SS_OK) return 5;

@@ -10,9 +10,9 @@
 // nonlinear model refactors its preconditioner at every drag step: catmark_righthanded's tangent
 // (1,245 DOFs) took 9-12 ms in CHOLMOD, 3.6 ms here. On large factors this is as fast or faster
 // (first linear solves, interleaved: spot_quadrangulated 215-233 -> 161-169 ms,
-// blub_quadrangulated 767-916 -> 622-698 ms; docs/benchmarks.md). CHOLMOD still chooses the ordering (METIS for large matrices) and the
-// supernodes; its factor is filled here (a simplicial one, which CHOLMOD picks for very sparse
-// factors, by CHOLMOD).
+// blub_quadrangulated 767-916 -> 622-698 ms; docs/benchmarks.md). CHOLMOD still chooses the
+// ordering (METIS for large matrices) and the supernodes; its factor is filled here (a simplicial
+// one, which CHOLMOD picks for very sparse factors, by CHOLMOD).
 //
 // The dense kernels are Eigen's, compiled twice (supernodal_numeric_kernel.cpp): for the
 // baseline and for x86-64-v3 (AVX2, FMA), picked when the library loads, as the nonlinear
