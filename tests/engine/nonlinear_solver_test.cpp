@@ -170,6 +170,47 @@ DeformationRequest helmet_grab(const ControlMesh& helmet) {
   return request;
 }
 
+// A drag step continuing the last ones in the same direction starts from a state extrapolated
+// from the drag's answers. A prediction that leaves most of the forces acting out of balance (as
+// past a buckling load; here spoilt by the test hook) is discarded, and the step starts from the
+// last answer instead: the same answer either way.
+TEST(NonlinearSolver, ADragStepDiscardsAUselessPrediction) {
+  const ControlMesh helmet = test::load_asset_mesh("catmark_helmet.obj");
+  auto model = ShellModel::build(helmet, material()).value();
+  DeformationRequest request = helmet_grab(helmet);
+  const Vec3 full = request.limit_constraints[0].displacement;
+  constexpr int kSteps = 8;
+  auto drag = [&](bool spoil_last) {
+    NonlinearSolver solver(model, std::make_shared<FactorCache>());
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(model->num_dofs());
+    NonlinearStats::Prediction last_prediction = NonlinearStats::Prediction::kNone;
+    for (int k = 1; k <= kSteps; ++k) {
+      request.limit_constraints[0].displacement = (0.02 * k) * full;
+      Result<NonlinearSolution> step = [&] {
+        const test::ScopedKnob<internal::FastPathCorruption> spoil(
+            internal::g_corrupt_prediction,
+            spoil_last && k == kSteps ? +[](Eigen::VectorXd& du) { du *= 40.0; } : internal::FastPathCorruption{});
+        return solver.solve(request, u);
+      }();
+      EXPECT_TRUE(step.ok()) << step.error().message;
+      if (!step.ok()) return u;
+      EXPECT_LT(step->stats.residual, 1e-8);
+      EXPECT_LE(step->stats.check_ratio, 1.0);
+      // The first step has no earlier answers to extrapolate from; the later ones do.
+      if (k == 1) EXPECT_EQ(step->stats.prediction, NonlinearStats::Prediction::kNone);
+      u = step->displacement;
+      last_prediction = step->stats.prediction;
+      std::printf("step %d%s: prediction %d, %d iterations, %d load steps\n", k, spoil_last && k == kSteps ? " (spoilt)" : "",
+                  static_cast<int>(step->stats.prediction), step->stats.iterations, step->stats.load_steps);
+    }
+    EXPECT_EQ(last_prediction,
+              spoil_last ? NonlinearStats::Prediction::kDiscarded : NonlinearStats::Prediction::kUsed);
+    return u;
+  };
+  const Eigen::VectorXd predicted = drag(false), discarded = drag(true);
+  EXPECT_LT((discarded - predicted).norm(), 1e-6 * predicted.norm());
+}
+
 // How the Newton directions are computed changes how the answer is reached, not the answer: the
 // same residual decides. Directions on the approximate tangent (K plus the coarse rule's
 // nonlinear remainder), and exact directions whose tangent products are differences of the

@@ -20,4 +20,8 @@ extern std::atomic<FastPathCorruption> g_corrupt_nonlinear_answer;
 /// directions ran slow), wherever the accuracy asked of GMRES allows them.
 extern std::atomic<bool> g_directions_by_difference;
 
+/// When set, called with a drag step's predicted change of the displacements (3n) before the
+/// step evaluates it: a test spoils the prediction there and sees the step discard it.
+extern std::atomic<FastPathCorruption> g_corrupt_prediction;
+
 }  // namespace softshell::engine::internal

@@ -81,6 +81,12 @@ struct NonlinearStats {
   int32_t load_steps = 0;         ///< 1 when the request converged in one step
   int32_t krylov_iterations = 0;  ///< GMRES iterations (each one tangent product and one solve)
   int32_t factorizations = 0;     ///< tangent stiffness factorizations
+  /// A drag step's start: a request continuing the last answer of a drag in the same direction
+  /// starts from a state extrapolated from the drag's last answers, unless that state leaves
+  /// more than half of the forces acting out of balance (as past a buckling load, where the
+  /// extrapolated shape is on no branch): then it starts from the last answer.
+  enum class Prediction : int8_t { kNone, kUsed, kDiscarded };
+  Prediction prediction = Prediction::kNone;
   double residual = 0.0;          ///< final relative out-of-balance force (< tolerance)
   /// The answer's check (the safety net): the largest residual / allowance over the nonlinear
   /// equilibrium and every constraint row (<= 1; an answer that fails it is refused).
