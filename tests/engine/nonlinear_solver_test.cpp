@@ -200,8 +200,9 @@ TEST(NonlinearSolver, ADragStepDiscardsAUselessPrediction) {
       if (k == 1) EXPECT_EQ(step->stats.prediction, NonlinearStats::Prediction::kNone);
       u = step->displacement;
       last_prediction = step->stats.prediction;
-      std::printf("step %d%s: prediction %d, %d iterations, %d load steps\n", k, spoil_last && k == kSteps ? " (spoilt)" : "",
-                  static_cast<int>(step->stats.prediction), step->stats.iterations, step->stats.load_steps);
+      std::printf("step %d%s: prediction %d, %d iterations, %d load steps\n", k,
+                  spoil_last && k == kSteps ? " (spoilt)" : "", static_cast<int>(step->stats.prediction),
+                  step->stats.iterations, step->stats.load_steps);
     }
     EXPECT_EQ(last_prediction,
               spoil_last ? NonlinearStats::Prediction::kDiscarded : NonlinearStats::Prediction::kUsed);
@@ -209,6 +210,37 @@ TEST(NonlinearSolver, ADragStepDiscardsAUselessPrediction) {
   };
   const Eigen::VectorXd predicted = drag(false), discarded = drag(true);
   EXPECT_LT((discarded - predicted).norm(), 1e-6 * predicted.norm());
+
+  // Where the step cannot converge from the last answer either (here every load step of that
+  // attempt fails by the test hook: 1, 1/2, ... down to the smallest, 1/1024), the discarded
+  // prediction is tried after all before the request is refused.
+  NonlinearSolver solver(model, std::make_shared<FactorCache>());
+  Eigen::VectorXd u = Eigen::VectorXd::Zero(model->num_dofs());
+  for (int k = 1; k <= kSteps; ++k) {
+    request.limit_constraints[0].displacement = (0.02 * k) * full;
+    if (k < kSteps) {
+      auto step = solver.solve(request, u);
+      ASSERT_TRUE(step.ok()) << step.error().message;
+      u = step->displacement;
+      continue;
+    }
+    const test::ScopedKnob<internal::FastPathCorruption> spoil(internal::g_corrupt_prediction,
+                                                               +[](Eigen::VectorXd& du) { du *= 10.0; });
+    const test::ScopedKnob<int> fail(internal::g_fail_load_steps, 11);
+    auto step = solver.solve(request, u);
+    ASSERT_TRUE(step.ok()) << step.error().message;
+    EXPECT_EQ(step->stats.prediction, NonlinearStats::Prediction::kUsedAfterAll);
+    EXPECT_EQ(internal::g_fail_load_steps.load(), 0);
+    EXPECT_LT(step->stats.residual, 1e-8);
+    EXPECT_LE(step->stats.check_ratio, 1.0);
+    EXPECT_LT((step->displacement - predicted).norm(), 1e-6 * predicted.norm());
+    // With one failure more, no attempt is left: refused, saying how far it got.
+    const test::ScopedKnob<int> fail_all(internal::g_fail_load_steps, 1000);
+    auto refused = solver.solve(request, u);
+    ASSERT_FALSE(refused.ok());
+    EXPECT_EQ(refused.error().code, ErrorCode::kUnprocessable);
+    EXPECT_NE(refused.error().message.find("did not converge in steps of"), std::string::npos) << refused.error().message;
+  }
 }
 
 // How the Newton directions are computed changes how the answer is reached, not the answer: the

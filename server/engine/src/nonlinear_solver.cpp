@@ -33,6 +33,7 @@ namespace internal {
 std::atomic<FastPathCorruption> g_corrupt_nonlinear_answer{nullptr};
 std::atomic<bool> g_directions_by_difference{false};
 std::atomic<FastPathCorruption> g_corrupt_prediction{nullptr};
+std::atomic<int> g_fail_load_steps{0};
 
 // What a solve leaves for the next one that starts from its answer (the next step of a drag).
 struct NonlinearMemory {
@@ -635,6 +636,9 @@ double Run::first_step() {
 }
 
 bool Run::solve_step(double lambda, double tolerance) {
+  for (int left = internal::g_fail_load_steps.load(); left > 0;) {
+    if (internal::g_fail_load_steps.compare_exchange_weak(left, left - 1)) return false;  // a test's failure
+  }
   // Prescribed DOFs along their path; the state is already at u unless they moved (a drag
   // changes only rows).
   path_of_fixed_->apply(lambda, u_);
@@ -889,6 +893,7 @@ NonlinearSolution Run::run() {
   history_ = same_drag ? mem->history : decltype(history_){};
   if (!same_drag && at_rest) history_.push_back({Eigen::VectorXd::Zero(targets_.size()), u0_});  // rest answers the empty request
 
+  Eigen::VectorXd discarded_path;  // a prediction not used (below), kept for a last attempt
   if (path_.size() == ndof && mem->end_force.size() == ndof) {
     // A drag step with a predictor evaluates its predicted state first, not this one: the last
     // answer's forces (one evaluation of the model's rule of the 6-7 a step costs).
@@ -905,6 +910,7 @@ NonlinearSolution Run::run() {
                                                            kUselessPrediction * force_scale(state_, 1.0);
     stats_.prediction = useful ? NonlinearStats::Prediction::kUsed : NonlinearStats::Prediction::kDiscarded;
     if (!useful) {
+      discarded_path = std::move(path_);
       path_.resize(0);
       if (!evaluate(u_, state_)) {
         fail(ErrorCode::kInternal, "the nonlinear solve could not evaluate its last answer again");
@@ -931,7 +937,8 @@ NonlinearSolution Run::run() {
     }
     if (path_.size() == ndof) u_ = u_start + (target - lambda) * path_;
     if (solve_step(target, target < 1.0 ? std::max(kStepTolerance, options_.tolerance) : options_.tolerance)) {
-      lambda = reached_ = target;
+      lambda = target;
+      reached_ = std::max(reached_, target);
       step = std::min(1.0, 2.0 * step);
       converged.push_back({lambda, u_});
       continue;
@@ -939,12 +946,25 @@ NonlinearSolution Run::run() {
     u_ = u_start;
     step *= 0.5;
     if (stats_.iterations >= options_.max_iterations) {
-      give_up(lambda, "the iteration limit of " + std::to_string(options_.max_iterations) + " was reached; residual " +
-                          scientific(last_residual_));
+      give_up(reached_, "the iteration limit of " + std::to_string(options_.max_iterations) + " was reached; residual " +
+                            scientific(last_residual_));
     }
     if (step < kMinLoadStep || stats_.load_steps >= options_.max_load_steps) {
-      give_up(lambda, "it did not converge in steps of " + percent(step * 2.0) + " of the request; residual " +
-                          scientific(last_residual_));
+      if (discarded_path.size() == ndof && stats_.load_steps < options_.max_load_steps) {
+        // Before refusing the step: from the prediction it discarded after all, in one load step
+        // (and halved from there), within what is left of the request's budgets.
+        path_ = std::move(discarded_path);
+        discarded_path.resize(0);
+        stats_.prediction = NonlinearStats::Prediction::kUsedAfterAll;
+        lambda = 0.0;
+        step = 1.0;
+        converged.assign(1, {0.0, u0_});
+        u_ = u0_;
+        fresh_ = false;
+        continue;
+      }
+      give_up(reached_, "it did not converge in steps of " + percent(step * 2.0) + " of the request; residual " +
+                            scientific(last_residual_));
     }
     if (!evaluate(u_, state_)) give_up(lambda, "internal error: a converged state became invalid");
     fresh_ = false;

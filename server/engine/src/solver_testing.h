@@ -24,4 +24,8 @@ extern std::atomic<bool> g_directions_by_difference;
 /// step evaluates it: a test spoils the prediction there and sees the step discard it.
 extern std::atomic<FastPathCorruption> g_corrupt_prediction;
 
+/// When positive, that many of the nonlinear solver's next load steps fail at once (counted
+/// down), as load steps Newton cannot converge: a test drives the solver down its fallbacks.
+extern std::atomic<int> g_fail_load_steps;
+
 }  // namespace softshell::engine::internal

@@ -84,8 +84,9 @@ struct NonlinearStats {
   /// A drag step's start: a request continuing the last answer of a drag in the same direction
   /// starts from a state extrapolated from the drag's last answers, unless that state leaves
   /// more than half of the forces acting out of balance (as past a buckling load, where the
-  /// extrapolated shape is on no branch): then it starts from the last answer.
-  enum class Prediction : int8_t { kNone, kUsed, kDiscarded };
+  /// extrapolated shape is on no branch): then it starts from the last answer, and if it cannot
+  /// converge from there, from the prediction after all before it refuses the request.
+  enum class Prediction : int8_t { kNone, kUsed, kDiscarded, kUsedAfterAll };
   Prediction prediction = Prediction::kNone;
   double residual = 0.0;          ///< final relative out-of-balance force (< tolerance)
   /// The answer's check (the safety net): the largest residual / allowance over the nonlinear
