@@ -202,10 +202,12 @@ DragMeasurement measure_drag(ControlMesh mesh, int steps) {
     times.push_back(ms);
     const engine::NonlinearStats& s = step->stats;
     if (std::getenv("SOFTSHELL_BENCH_STEPS")) {
+      static const char* const kPrediction[] = {"none", "used", "discarded", "used after all"};
       std::printf("  step %d: %.1f ms, %d Newton (%d approximate, %d by differences, %d evaluations, %d early), %d Krylov, %d factors; "
-                  "forces %.1f ms, Krylov %.1f ms, tangents %.1f ms; %ld pages faulted in\n", k, ms, s.iterations,
+                  "forces %.1f ms, Krylov %.1f ms, tangents %.1f ms; %ld pages faulted in; prediction %s\n", k, ms, s.iterations,
                   s.approximate_iterations, s.difference_iterations, s.evaluations, s.early_evaluations, s.krylov_iterations,
-                  s.factorizations, s.evaluate_ms, s.krylov_ms, s.tangent_ms, faults);
+                  s.factorizations, s.evaluate_ms, s.krylov_ms, s.tangent_ms, faults,
+                  kPrediction[static_cast<int>(s.prediction)]);
       std::fflush(stdout);  // a long drag shows its progress, also into a file
     }
     result.iterations += s.iterations;
