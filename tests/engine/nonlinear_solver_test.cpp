@@ -213,34 +213,38 @@ TEST(NonlinearSolver, ADragStepDiscardsAUselessPrediction) {
 
   // Where the step cannot converge from the last answer either (here every load step of that
   // attempt fails by the test hook: 1, 1/2, ... down to the smallest, 1/1024), the discarded
-  // prediction is tried after all before the request is refused.
-  NonlinearSolver solver(model, std::make_shared<FactorCache>());
-  Eigen::VectorXd u = Eigen::VectorXd::Zero(model->num_dofs());
-  for (int k = 1; k <= kSteps; ++k) {
-    request.limit_constraints[0].displacement = (0.02 * k) * full;
-    if (k < kSteps) {
+  // prediction is tried after all before the request is refused; where that fails too, it is.
+  int failures_left = 0;
+  auto last_step = [&](int failing_load_steps) {
+    NonlinearSolver solver(model, std::make_shared<FactorCache>());
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(model->num_dofs());
+    for (int k = 1; k < kSteps; ++k) {
+      request.limit_constraints[0].displacement = (0.02 * k) * full;
       auto step = solver.solve(request, u);
-      ASSERT_TRUE(step.ok()) << step.error().message;
-      u = step->displacement;
-      continue;
+      EXPECT_TRUE(step.ok()) << step.error().message;
+      if (step.ok()) u = step->displacement;
     }
+    request.limit_constraints[0].displacement = (0.02 * kSteps) * full;
     const test::ScopedKnob<internal::FastPathCorruption> spoil(internal::g_corrupt_prediction,
                                                                +[](Eigen::VectorXd& du) { du *= 10.0; });
-    const test::ScopedKnob<int> fail(internal::g_fail_load_steps, 11);
-    auto step = solver.solve(request, u);
-    ASSERT_TRUE(step.ok()) << step.error().message;
-    EXPECT_EQ(step->stats.prediction, NonlinearStats::Prediction::kUsedAfterAll);
-    EXPECT_EQ(internal::g_fail_load_steps.load(), 0);
-    EXPECT_LT(step->stats.residual, 1e-8);
-    EXPECT_LE(step->stats.check_ratio, 1.0);
-    EXPECT_LT((step->displacement - predicted).norm(), 1e-6 * predicted.norm());
-    // With one failure more, no attempt is left: refused, saying how far it got.
-    const test::ScopedKnob<int> fail_all(internal::g_fail_load_steps, 1000);
-    auto refused = solver.solve(request, u);
-    ASSERT_FALSE(refused.ok());
-    EXPECT_EQ(refused.error().code, ErrorCode::kUnprocessable);
-    EXPECT_NE(refused.error().message.find("did not converge in steps of"), std::string::npos) << refused.error().message;
-  }
+    const test::ScopedKnob<int> fail(internal::g_fail_load_steps, failing_load_steps);
+    auto answer = solver.solve(request, u);
+    failures_left = internal::g_fail_load_steps.load();
+    return answer;
+  };
+  auto after_all = last_step(11);
+  ASSERT_TRUE(after_all.ok()) << after_all.error().message;
+  EXPECT_EQ(after_all->stats.prediction, NonlinearStats::Prediction::kUsedAfterAll);
+  EXPECT_EQ(failures_left, 0);
+  EXPECT_LT(after_all->stats.residual, 1e-8);
+  EXPECT_LE(after_all->stats.check_ratio, 1.0);
+  EXPECT_LT((after_all->displacement - predicted).norm(), 1e-6 * predicted.norm());
+  // Every load step of both attempts failing (11 each): refused, saying why.
+  auto refused = last_step(1000);
+  EXPECT_EQ(failures_left, 1000 - 2 * 11);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kUnprocessable);
+  EXPECT_NE(refused.error().message.find("did not converge in steps of"), std::string::npos) << refused.error().message;
 }
 
 // How the Newton directions are computed changes how the answer is reached, not the answer: the
