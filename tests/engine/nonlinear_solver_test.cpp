@@ -180,36 +180,47 @@ TEST(NonlinearSolver, ADragStepDiscardsAUselessPrediction) {
   DeformationRequest request = helmet_grab(helmet);
   const Vec3 full = request.limit_constraints[0].displacement;
   constexpr int kSteps = 8;
-  auto drag = [&](bool spoil_last) {
-    NonlinearSolver solver(model, std::make_shared<FactorCache>());
+  // Drag step k of the drag (the grab at 2% k of the full pull) from the answer u.
+  auto drag_step = [&](NonlinearSolver& solver, const Eigen::VectorXd& u, int k) {
+    request.limit_constraints[0].displacement = (0.02 * k) * full;
+    return solver.solve(request, u);
+  };
+  // The first kSteps - 1 steps of the drag on `solver`: their last answer.
+  auto drag_to_last_step = [&](NonlinearSolver& solver) {
     Eigen::VectorXd u = Eigen::VectorXd::Zero(model->num_dofs());
-    NonlinearStats::Prediction last_prediction = NonlinearStats::Prediction::kNone;
-    for (int k = 1; k <= kSteps; ++k) {
-      request.limit_constraints[0].displacement = (0.02 * k) * full;
-      Result<NonlinearSolution> step = [&] {
-        const test::ScopedKnob<internal::FastPathCorruption> spoil(
-            internal::g_corrupt_prediction,
-            spoil_last && k == kSteps ? +[](Eigen::VectorXd& du) { du *= 40.0; } : internal::FastPathCorruption{});
-        return solver.solve(request, u);
-      }();
+    for (int k = 1; k < kSteps; ++k) {
+      auto step = drag_step(solver, u, k);
       EXPECT_TRUE(step.ok()) << step.error().message;
       if (!step.ok()) return u;
       EXPECT_LT(step->stats.residual, 1e-8);
       EXPECT_LE(step->stats.check_ratio, 1.0);
       // The first step has no earlier answers to extrapolate from; the later ones do.
-      if (k == 1) EXPECT_EQ(step->stats.prediction, NonlinearStats::Prediction::kNone);
+      if (k == 1) {
+        EXPECT_EQ(step->stats.prediction, NonlinearStats::Prediction::kNone);
+      }
       u = step->displacement;
-      last_prediction = step->stats.prediction;
-      std::printf("step %d%s: prediction %d, %d iterations, %d load steps\n", k,
-                  spoil_last && k == kSteps ? " (spoilt)" : "", static_cast<int>(step->stats.prediction),
-                  step->stats.iterations, step->stats.load_steps);
     }
-    EXPECT_EQ(last_prediction,
-              spoil_last ? NonlinearStats::Prediction::kDiscarded : NonlinearStats::Prediction::kUsed);
     return u;
   };
-  const Eigen::VectorXd predicted = drag(false), discarded = drag(true);
-  EXPECT_LT((discarded - predicted).norm(), 1e-6 * predicted.norm());
+  using Spoil = test::ScopedKnob<internal::FastPathCorruption>;
+  NonlinearSolver plain(model, std::make_shared<FactorCache>()), spoilt(model, std::make_shared<FactorCache>());
+  auto used = drag_step(plain, drag_to_last_step(plain), kSteps);
+  auto discarded = [&] {
+    const Eigen::VectorXd u = drag_to_last_step(spoilt);
+    const Spoil spoil(internal::g_corrupt_prediction, +[](Eigen::VectorXd& du) { du *= 40.0; });
+    return drag_step(spoilt, u, kSteps);
+  }();
+  for (const auto* answer : {&used, &discarded}) {
+    ASSERT_TRUE(answer->ok()) << answer->error().message;
+    EXPECT_LT((*answer)->stats.residual, 1e-8);
+    EXPECT_LE((*answer)->stats.check_ratio, 1.0);
+  }
+  EXPECT_EQ(used->stats.prediction, NonlinearStats::Prediction::kUsed);
+  EXPECT_EQ(discarded->stats.prediction, NonlinearStats::Prediction::kDiscarded);
+  const Eigen::VectorXd& predicted = used->displacement;
+  EXPECT_LT((discarded->displacement - predicted).norm(), 1e-6 * predicted.norm());
+  std::printf("last step: %d iterations from its prediction, %d from the last answer\n", used->stats.iterations,
+              discarded->stats.iterations);
 
   // Where the step cannot converge from the last answer either (here every load step of that
   // attempt fails by the test hook: 1, 1/2, ... down to the smallest, 1/1024), the discarded
@@ -217,18 +228,10 @@ TEST(NonlinearSolver, ADragStepDiscardsAUselessPrediction) {
   int failures_left = 0;
   auto last_step = [&](int failing_load_steps) {
     NonlinearSolver solver(model, std::make_shared<FactorCache>());
-    Eigen::VectorXd u = Eigen::VectorXd::Zero(model->num_dofs());
-    for (int k = 1; k < kSteps; ++k) {
-      request.limit_constraints[0].displacement = (0.02 * k) * full;
-      auto step = solver.solve(request, u);
-      EXPECT_TRUE(step.ok()) << step.error().message;
-      if (step.ok()) u = step->displacement;
-    }
-    request.limit_constraints[0].displacement = (0.02 * kSteps) * full;
-    const test::ScopedKnob<internal::FastPathCorruption> spoil(internal::g_corrupt_prediction,
-                                                               +[](Eigen::VectorXd& du) { du *= 10.0; });
+    const Eigen::VectorXd u = drag_to_last_step(solver);
+    const Spoil spoil(internal::g_corrupt_prediction, +[](Eigen::VectorXd& du) { du *= 10.0; });
     const test::ScopedKnob<int> fail(internal::g_fail_load_steps, failing_load_steps);
-    auto answer = solver.solve(request, u);
+    auto answer = drag_step(solver, u, kSteps);
     failures_left = internal::g_fail_load_steps.load();
     return answer;
   };
