@@ -250,6 +250,60 @@ TEST(NonlinearSolver, ADragStepDiscardsAUselessPrediction) {
   EXPECT_NE(refused.error().message.find("did not converge in steps of"), std::string::npos) << refused.error().message;
 }
 
+// The load steps a test's filter saw (from, to, failed by it), and how many of those that reach
+// the request's end it still fails.
+struct LoadStepRecord {
+  double from, to;
+  bool failed;
+};
+std::vector<LoadStepRecord> g_load_steps;
+int g_failing_ends = 0;
+
+// A load step that fails is tried again at half its length from the same start. After two
+// converged halves the nominal step is twice what is left to the request's end, so halving the
+// nominal step instead tried the very load step that had just failed again (the solver repeated
+// failed load steps up to eight times in a row at spot_quadrangulated's limit points).
+TEST(NonlinearSolver, AFailedLoadStepIsTriedAgainAtHalfItsLength) {
+  const ControlMesh helmet = test::load_asset_mesh("catmark_helmet.obj");
+  auto model = ShellModel::build(helmet, material()).value();
+  DeformationRequest request = helmet_grab(helmet);
+  const Vec3 full = request.limit_constraints[0].displacement;
+  request.limit_constraints[0].displacement = 0.05 * full;
+  NonlinearSolver plain(model, std::make_shared<FactorCache>()), failing(model, std::make_shared<FactorCache>());
+  auto expected = plain.solve(request);
+  ASSERT_TRUE(expected.ok()) << expected.error().message;
+  g_load_steps.clear();
+  g_failing_ends = 2;
+  auto answer = [&] {
+    const test::ScopedKnob<internal::LoadStepFilter> filter(internal::g_fail_load_step, +[](double from, double to) {
+      const bool fail = to == 1.0 && g_failing_ends > 0;
+      if (fail) --g_failing_ends;
+      g_load_steps.push_back({from, to, fail});
+      return fail;
+    });
+    return failing.solve(request);
+  }();
+  ASSERT_TRUE(answer.ok()) << answer.error().message;
+  EXPECT_LT(answer->stats.residual, 1e-8);
+  EXPECT_LE(answer->stats.check_ratio, 1.0);
+  EXPECT_LT((answer->displacement - expected->displacement).norm(), 1e-6 * expected->displacement.norm());
+  EXPECT_EQ(g_failing_ends, 0);
+  ASSERT_GE(g_load_steps.size(), 5u);
+  EXPECT_EQ(answer->stats.load_steps, static_cast<int>(g_load_steps.size()));
+  // Each attempt after a failed one starts where it did and goes half as far.
+  for (size_t k = 1; k < g_load_steps.size(); ++k) {
+    const LoadStepRecord &before = g_load_steps[k - 1], &now = g_load_steps[k];
+    if (!before.failed) {
+      EXPECT_EQ(now.from, before.to) << "load step " << k;
+      continue;
+    }
+    EXPECT_EQ(now.from, before.from) << "load step " << k;
+    EXPECT_DOUBLE_EQ(now.to - now.from, 0.5 * (before.to - before.from)) << "load step " << k;
+  }
+  EXPECT_EQ(g_load_steps.back().to, 1.0);
+  EXPECT_FALSE(g_load_steps.back().failed);
+}
+
 // How the Newton directions are computed changes how the answer is reached, not the answer: the
 // same residual decides. Directions on the approximate tangent (K plus the coarse rule's
 // nonlinear remainder), and exact directions whose tangent products are differences of the

@@ -28,4 +28,10 @@ extern std::atomic<FastPathCorruption> g_corrupt_prediction;
 /// down), as load steps Newton cannot converge: a test drives the solver down its fallbacks.
 extern std::atomic<int> g_fail_load_steps;
 
+/// When set, called as each load step of the nonlinear solver starts, with the fractions of the
+/// request it goes from and to; a load step it returns true for fails at once (a test chooses
+/// which, and sees what the solver tries next).
+using LoadStepFilter = bool (*)(double from, double to);
+extern std::atomic<LoadStepFilter> g_fail_load_step;
+
 }  // namespace softshell::engine::internal
