@@ -842,10 +842,10 @@ double Run::check_answer(const Eigen::VectorXd& u) {
 
 void Run::give_up(double lambda, const std::string& why) const {
   std::string message = "the nonlinear model could not bring the shell to equilibrium: ";
-  // (Short of the request's end, load steps converge only to kStepTolerance: the fraction says how
-  // far the homotopy got, not where an equilibrium path ends.)
+  // (Short of the request's end, load steps converge only to kStepTolerance, as run() asks: the
+  // fraction says how far the homotopy got, not where an equilibrium path ends.)
   message += lambda > 0.0 ? "it reached " + percent(lambda) + " of the requested loads and displacements to within " +
-                                percent(kStepTolerance) + " of equilibrium (" + why + ")"
+                                percent(std::max(kStepTolerance, options_.tolerance)) + " of equilibrium (" + why + ")"
                           : why;
   message += ". The shell may snap through or buckle under this request, or the load may exceed what it carries. "
              "Try a smaller step (drag in smaller increments, starting each from the previous answer), a smaller load, "
