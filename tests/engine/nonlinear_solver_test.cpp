@@ -304,6 +304,39 @@ TEST(NonlinearSolver, AFailedLoadStepIsTriedAgainAtHalfItsLength) {
   EXPECT_FALSE(g_load_steps.back().failed);
 }
 
+// Newton that has come near an answer and then stops making progress (on spot_quadrangulated's
+// drag it wandered between 1e-5 and 1e-1 near unstable states until the load step was split)
+// hands over to trust-region steps on the energy, which carry it to the answer. Here the Newton
+// directions are cut to a tenth while they are between 1e-5 and 1e-2 of the first one (so
+// Newton gains only a tenth an iteration there): without the hand-over every load step failed
+// and the request was refused.
+double g_first_direction = 0.0;
+
+TEST(NonlinearSolver, NewtonThatStopsGainingNearAnAnswerHandsOverToTrustRegionSteps) {
+  const ControlMesh helmet = test::load_asset_mesh("catmark_helmet.obj");
+  auto model = ShellModel::build(helmet, material()).value();
+  DeformationRequest request = helmet_grab(helmet);
+  request.limit_constraints[0].displacement *= 0.05;
+  auto expected = NonlinearSolver(model, std::make_shared<FactorCache>()).solve(request);
+  ASSERT_TRUE(expected.ok()) << expected.error().message;
+  EXPECT_EQ(expected->stats.trust_region_steps, 0);
+  g_first_direction = 0.0;
+  auto answer = [&] {
+    const test::ScopedKnob<internal::FastPathCorruption> spoil(
+        internal::g_spoil_newton_direction, +[](Eigen::VectorXd& direction) {
+          const double size = direction.norm();
+          if (g_first_direction == 0.0) g_first_direction = size;
+          if (size < 1e-2 * g_first_direction && size > 1e-5 * g_first_direction) direction *= 0.1;
+        });
+    return NonlinearSolver(model, std::make_shared<FactorCache>()).solve(request);
+  }();
+  ASSERT_TRUE(answer.ok()) << answer.error().message;
+  EXPECT_GT(answer->stats.trust_region_steps, 0);
+  EXPECT_LT(answer->stats.residual, 1e-8);
+  EXPECT_LE(answer->stats.check_ratio, 1.0);
+  EXPECT_LT((answer->displacement - expected->displacement).norm(), 1e-6 * expected->displacement.norm());
+}
+
 // How the Newton directions are computed changes how the answer is reached, not the answer: the
 // same residual decides. Directions on the approximate tangent (K plus the coarse rule's
 // nonlinear remainder), and exact directions whose tangent products are differences of the

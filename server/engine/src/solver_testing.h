@@ -34,4 +34,8 @@ extern std::atomic<int> g_fail_load_steps;
 using LoadStepFilter = bool (*)(double from, double to);
 extern std::atomic<LoadStepFilter> g_fail_load_step;
 
+/// When set, called with every Newton direction of the nonlinear solver (3n) before the step
+/// along it: a test spoils directions there so that Newton stops making progress.
+extern std::atomic<FastPathCorruption> g_spoil_newton_direction;
+
 }  // namespace softshell::engine::internal

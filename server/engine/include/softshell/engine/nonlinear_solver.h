@@ -76,6 +76,9 @@ struct NonlinearStats {
   /// of which exact directions with tangent products by differences of the internal forces
   /// (after approximate ones, where an exact product would need a second pass over the points)
   int32_t difference_iterations = 0;
+  /// of which trust-region steps on the potential energy (where Newton stalled on an indefinite
+  /// tangent, or wandered near an unstable state, instead of converging)
+  int32_t trust_region_steps = 0;
   int32_t evaluations = 0;        ///< evaluations of the internal forces (iterations + line searches)
   int32_t early_evaluations = 0;  ///< of which on the early rule (NonlinearOptions::early_rule_levels)
   int32_t load_steps = 0;         ///< 1 when the request converged in one step
