@@ -307,10 +307,9 @@ TEST(NonlinearSolver, AFailedLoadStepIsTriedAgainAtHalfItsLength) {
 // Newton that has come near an answer and then stops making progress (on spot_quadrangulated's
 // drag it wandered between 1e-5 and 1e-1 near unstable states until the load step was split)
 // hands over to trust-region steps on the energy, which carry it to the answer. Here the Newton
-// directions are cut to a tenth while they are between 1e-5 and 1e-2 of the first one (so
-// Newton gains only a tenth an iteration there): without the hand-over every load step failed
+// directions are cut to a tenth while the residual is between 1e-4 and 1e-2, where the rule acts
+// (so Newton gains only a tenth an iteration there): without the hand-over every load step failed
 // and the request was refused.
-double g_first_direction = 0.0;
 
 TEST(NonlinearSolver, NewtonThatStopsGainingNearAnAnswerHandsOverToTrustRegionSteps) {
   const ControlMesh helmet = test::load_asset_mesh("catmark_helmet.obj");
@@ -320,13 +319,10 @@ TEST(NonlinearSolver, NewtonThatStopsGainingNearAnAnswerHandsOverToTrustRegionSt
   auto expected = NonlinearSolver(model, std::make_shared<FactorCache>()).solve(request);
   ASSERT_TRUE(expected.ok()) << expected.error().message;
   EXPECT_EQ(expected->stats.trust_region_steps, 0);
-  g_first_direction = 0.0;
   auto answer = [&] {
-    const test::ScopedKnob<internal::FastPathCorruption> spoil(
-        internal::g_spoil_newton_direction, +[](Eigen::VectorXd& direction) {
-          const double size = direction.norm();
-          if (g_first_direction == 0.0) g_first_direction = size;
-          if (size < 1e-2 * g_first_direction && size > 1e-5 * g_first_direction) direction *= 0.1;
+    const test::ScopedKnob<internal::DirectionSpoiler> spoil(
+        internal::g_spoil_newton_direction, +[](double residual, Eigen::VectorXd& direction) {
+          if (residual < 1e-2 && residual > 1e-4) direction *= 0.1;
         });
     return NonlinearSolver(model, std::make_shared<FactorCache>()).solve(request);
   }();

@@ -36,7 +36,7 @@ std::atomic<bool> g_directions_by_difference{false};
 std::atomic<FastPathCorruption> g_corrupt_prediction{nullptr};
 std::atomic<int> g_fail_load_steps{0};
 std::atomic<LoadStepFilter> g_fail_load_step{nullptr};
-std::atomic<FastPathCorruption> g_spoil_newton_direction{nullptr};
+std::atomic<DirectionSpoiler> g_spoil_newton_direction{nullptr};
 
 // What a solve leaves for the next one that starts from its answer (the next step of a drag).
 struct NonlinearMemory {
@@ -795,7 +795,7 @@ bool Run::solve_step(double from, double lambda, double tolerance) {
     previous = res;
     Eigen::VectorXd p;
     if (!newton_direction(r, rows_ok ? Eigen::VectorXd::Zero(g.size()) : g, lambda, eta, p)) return false;
-    if (auto spoil = internal::g_spoil_newton_direction.load()) spoil(p);
+    if (auto spoil = internal::g_spoil_newton_direction.load()) spoil(res, p);
     // The Newton step, whole: in a thin shell it often overshoots into large membrane forces
     // that the next step removes, so neither the force nor the energy is a useful merit. It is
     // shortened only if it folds the surface or multiplies the force a thousandfold.

@@ -35,7 +35,9 @@ using LoadStepFilter = bool (*)(double from, double to);
 extern std::atomic<LoadStepFilter> g_fail_load_step;
 
 /// When set, called with every Newton direction of the nonlinear solver (3n) before the step
-/// along it: a test spoils directions there so that Newton stops making progress.
-extern std::atomic<FastPathCorruption> g_spoil_newton_direction;
+/// along it, and the relative out-of-balance force it starts from: a test spoils directions there
+/// so that Newton stops making progress.
+using DirectionSpoiler = void (*)(double residual, Eigen::VectorXd& direction);
+extern std::atomic<DirectionSpoiler> g_spoil_newton_direction;
 
 }  // namespace softshell::engine::internal
