@@ -310,7 +310,6 @@ TEST(NonlinearSolver, AFailedLoadStepIsTriedAgainAtHalfItsLength) {
 // directions are cut to a tenth while the residual is between 1e-4 and 1e-2, where the rule acts
 // (so Newton gains only a tenth an iteration there): without the hand-over every load step failed
 // and the request was refused.
-
 TEST(NonlinearSolver, NewtonThatStopsGainingNearAnAnswerHandsOverToTrustRegionSteps) {
   const ControlMesh helmet = test::load_asset_mesh("catmark_helmet.obj");
   auto model = ShellModel::build(helmet, material()).value();
