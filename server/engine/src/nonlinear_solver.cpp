@@ -19,6 +19,7 @@
 #include <chrono>
 #include <cmath>
 #include <sstream>
+#include <thread>
 
 #include "problem.h"
 #include "factor_cache_impl.h"
@@ -37,6 +38,7 @@ std::atomic<FastPathCorruption> g_corrupt_prediction{nullptr};
 std::atomic<int> g_fail_load_steps{0};
 std::atomic<LoadStepFilter> g_fail_load_step{nullptr};
 std::atomic<DirectionSpoiler> g_spoil_newton_direction{nullptr};
+std::atomic<int> g_tangent_product_delay_us{0};
 
 // What a solve leaves for the next one that starts from its answer (the next step of a drag).
 struct NonlinearMemory {
@@ -87,6 +89,13 @@ std::string scientific(double x) {
 constexpr int kMaxStepIterations = 30;     // Newton iterations per load step before it is split
 constexpr int kMaxKrylov = 24;             // GMRES iterations per Newton step
 constexpr int kMaxTrustSteps = 100;        // trust-region steps per load step
+// With NonlinearOptions::reproducible, what a refresh of the preconditioner costs in Krylov
+// iterations (refresh_if_slow): this many per factorization it took (a refresh past a buckling
+// load tries up to seven), and before a request's first refresh kFirstRefreshCost, as the timed
+// rule guesses. Timed, a refresh cost 15-20 Krylov iterations on catmark_righthanded and
+// spot_quadrangulated (docs/benchmarks.md, seventeenth session).
+constexpr int kRefreshCost = 20;
+constexpr int kFirstRefreshCost = 2;
 // Newton on the approximate directions that has come within kWanderBelow of an answer (with the
 // rows met) and then not halved its best residual in kWanderIterations iterations, still above
 // kTrustUntil, wanders near an unstable state (on spot_quadrangulated's drag, between 1e-5 and
@@ -198,17 +207,22 @@ class Run {
   void prepare_penalty();
   void refresh_tangent();
   // Refreshes when the Krylov iterations since the last refresh, beyond the two a solve on a
-  // fresh factor needs, have cost what a new factor costs (rent or buy: never more than twice
+  // fresh factor needs, add up to what a new factor costs (rent or buy: never more than twice
   // the best choice in hindsight; the last solve's cost alone let a stale factor serve solve
   // after solve of 9-16 iterations each), or when the last solve took more than two thirds of
   // GMRES's budget: on a factor made at the current state it needs 1-3, so the factor is stale
   // here and the next solves nearby would be as slow (the trust region's CG, allowed twice as
   // many, is held to the same count). Measured on catmark_righthanded (docs/benchmarks.md): the
   // drag's step p95 83-87 ms instead of 108-115 ms, from rest 141 Krylov iterations instead of 160.
+  // Costs are timed (the last solve's time per iteration, the last refresh's time; a request's
+  // first refresh guessed at two iterations), or with NonlinearOptions::reproducible counted in
+  // Krylov iterations (kRefreshCost), so that the solver's path follows the requests only.
   void refresh_if_slow() {
-    const double refresh_cost = refresh_ms_ > 0.0 ? refresh_ms_ : 2.0 * krylov_ms_;  // a guess until measured
     const bool stale = last_krylov_ > 2 * kMaxKrylov / 3;
-    if (!fresh_ && last_krylov_ > 3 && (stale || excess_krylov_ms_ > refresh_cost)) refresh_tangent();
+    const bool dear = options_.reproducible
+                          ? excess_krylov_ > refresh_cost_
+                          : excess_krylov_ms_ > (refresh_ms_ > 0.0 ? refresh_ms_ : 2.0 * krylov_ms_);
+    if (!fresh_ && last_krylov_ > 3 && (stale || dear)) refresh_tangent();
   }
   double first_step();
   Eigen::VectorXd predicted_path(const std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>>& history) const;
@@ -257,16 +271,18 @@ class Run {
   std::vector<std::pair<int64_t, double>> penalty_;  // value index in the tangent, coefficient
   double penalty_unit_ = 0.0;
   int penalty_level_ = 0;
-  double refresh_ms_ = 0.0, krylov_ms_ = 0.0;  // cost of the last refresh, of one Krylov iteration
   int last_krylov_ = 0;
-  // Krylov time since the last refresh beyond what a fresh factor needs (refresh_if_slow).
-  double excess_krylov_ms_ = 0.0;
+  // Krylov iterations since the last refresh beyond the two a fresh factor needs (refresh_if_slow),
+  // timed and counted, and what the last refresh cost, timed and in Krylov iterations.
+  double excess_krylov_ms_ = 0.0, krylov_ms_ = 0.0, refresh_ms_ = 0.0;
+  int excess_krylov_ = 0, refresh_cost_ = kFirstRefreshCost;
   void count_krylov(int iterations, double ms) {
     stats_.krylov_iterations += iterations;
     stats_.krylov_ms += ms;
     last_krylov_ = iterations;
     if (iterations > 0) krylov_ms_ = ms / iterations;
     excess_krylov_ms_ += std::max(0, iterations - 2) * krylov_ms_;
+    excess_krylov_ += std::max(0, iterations - 2);
   }
   double last_residual_ = 0.0;
   // Newton directions on the approximate tangent (NonlinearShell::approximate_tangent_product)
@@ -371,6 +387,9 @@ bool Run::rows_met(const Eigen::VectorXd& g, const Eigen::VectorXd& u) const {
 }
 
 Eigen::VectorXd Run::tangent_times(const Eigen::VectorXd& v, double lambda, bool by_difference) {
+  if (const int delay = internal::g_tangent_product_delay_us.load(); delay > 0) {
+    std::this_thread::sleep_for(std::chrono::microseconds(delay));  // a test's slow host
+  }
   Eigen::VectorXd jv;
   const double largest = by_difference ? v.cwiseAbs().maxCoeff() : 0.0;
   if (approximate_) {
@@ -521,6 +540,7 @@ void Run::prepare_penalty() {
 // load): still a preconditioner, the Newton directions use their own tangent.
 void Run::refresh_tangent() {
   const auto t0 = Clock::now();
+  const int32_t factorizations_before = stats_.factorizations;
   auto matrix = std::make_shared<Eigen::SparseMatrix<double>>();
   if (shell_.has_jacobian_rule() && coarse_is_current()) {
     shell_.assemble_approximate_tangent(coarse_, pressure_, *matrix);  // the coarse state is at hand
@@ -573,7 +593,9 @@ void Run::refresh_tangent() {
   }
   fresh_ = true;
   excess_krylov_ms_ = 0.0;
+  excess_krylov_ = 0;
   refresh_ms_ = ms_between(t0, Clock::now());
+  refresh_cost_ = kRefreshCost * std::max(1, stats_.factorizations - factorizations_before);
   stats_.tangent_ms += refresh_ms_;
 }
 
@@ -683,6 +705,7 @@ bool Run::solve_step(double from, double lambda, double tolerance) {
   // same iterations).
   last_krylov_ = 0;
   excess_krylov_ms_ = 0.0;
+  excess_krylov_ = 0;
   if (state_.displacement.size() != u_.size() || state_.displacement != u_) {
     if (!evaluate(u_, state_)) return false;
     fresh_ = false;

@@ -40,4 +40,8 @@ extern std::atomic<LoadStepFilter> g_fail_load_step;
 using DirectionSpoiler = void (*)(double residual, Eigen::VectorXd& direction);
 extern std::atomic<DirectionSpoiler> g_spoil_newton_direction;
 
+/// When positive, every tangent product of the nonlinear solver's Krylov iterations sleeps that
+/// many microseconds first: a test slows the host down and sees the answers stay the same.
+extern std::atomic<int> g_tangent_product_delay_us;
+
 }  // namespace softshell::engine::internal

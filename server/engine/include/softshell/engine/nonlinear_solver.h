@@ -60,6 +60,16 @@ struct NonlinearOptions {
   /// 4.2. A request's only load step (a drag step) does not use it. The answer is the same: it
   /// converges, and is checked, on the model's rule. -1: none. Range -1..8.
   int early_rule_levels = 2;
+  /// Decide when to refactor the preconditioner by counting Krylov iterations (a refresh counted
+  /// as 20 per factorization it took) instead of timing them. The same requests then take the
+  /// same path to the same answer bit for bit however busy the host (the same build, thread count
+  /// and instruction set), where timed decisions can send a drag past a buckling load to another
+  /// buckled shape from run to run; for servers whose answers must agree with a replay or a
+  /// replica. Measured (docs/benchmarks.md, seventeenth session): catmark_righthanded takes the
+  /// same iterations either way; spot_quadrangulated's drag along 8 directions took about a fifth
+  /// longer (3 paths with a step over 60 s, against 2 timed, one of them refused). Only
+  /// `time_limit_seconds` still reads the clock.
+  bool reproducible = false;
   /// If set and it becomes true, a running solve stops at its next iteration with kCancelled
   /// (a server shutting down; the flag must outlive the solver).
   const std::atomic<bool>* cancel = nullptr;
