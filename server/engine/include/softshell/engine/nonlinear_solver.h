@@ -67,7 +67,7 @@ struct NonlinearOptions {
   /// buckled shape from run to run; for servers whose answers must agree with a replay or a
   /// replica. Measured (docs/benchmarks.md, seventeenth session): catmark_righthanded takes the
   /// same iterations either way; spot_quadrangulated's drag along 8 directions took about a fifth
-  /// longer (3 paths with a step over 60 s, against 2 timed, one of them refused). Only
+  /// longer (3 paths with a step over 60 s, against 1 timed and 1 refused path). Only
   /// `time_limit_seconds` still reads the clock.
   bool reproducible = false;
   /// If set and it becomes true, a running solve stops at its next iteration with kCancelled
