@@ -209,6 +209,58 @@ TEST(ServerAppTest, StopHasADeadlineAndASecondSignalStopsAtOnce) {
   EXPECT_NE(bad_limit.drain_stderr().find("--nonlinear-time-limit"), std::string::npos);
 }
 
+// --nonlinear-reproducible (or its variable): the start's log says which refresh rule nonlinear
+// solves use, and they answer; two servers, one set each way, give the same bytes to the same
+// nonlinear requests. (That the counted rule repeats itself on a slower host is the engine's
+// test, NonlinearSolver.AReproducibleSolverGivesTheSameAnswersOnASlowerHost.)
+TEST(ServerAppTest, NonlinearReproducibleFromTheCommandLineOrTheEnvironment) {
+  const auto run = [](std::vector<std::string> args, std::vector<std::pair<std::string, std::string>> env,
+                      std::vector<std::string>& answers) {
+    Child server(std::move(args), std::move(env));
+    const std::string out = server.read_until("\n", std::chrono::seconds(30));
+    const int port = port_of(out.substr(0, out.find('\n')));
+    EXPECT_GT(port, 0) << out;
+    if (port > 0) {
+      httplib::Client c("127.0.0.1", port);
+      c.set_read_timeout(std::chrono::seconds(60));
+      auto up = c.Post("/geometries", wire::encode_geometry_binary(exact_grid(), exact_material()).value(), kBin);
+      EXPECT_TRUE(up && up->status == 201);
+      const std::string base = "/geometries/" + wire::decode_upload_response_binary(up->body, true).value().id.hex();
+      for (double pull : {0.2, 0.4}) {  // a hold changed: the second solve starts from the first's answer
+        DeformationRequest request;
+        request.vertex_constraints = pinned_corners(4);
+        request.forces.push_back({grid_index(4, 2, 2), Vec3(0.0, 0.0, pull)});
+        request.model = DeformationModel::kNonlinear;
+        const Reply put = to_reply(c.Put(base + "/holds/hand", wire::encode_request_json(request), kJson));
+        EXPECT_EQ(put.status, 200) << put.body;
+        const Reply answer = get(c, base + "/latest_result", kBin);
+        EXPECT_EQ(answer.status, 200) << answer.body;
+        answers.push_back(answer.body);
+      }
+    }
+    kill(server.pid(), SIGTERM);
+    EXPECT_EQ(server.wait(std::chrono::seconds(15)), 0);
+    return server.drain_stderr();
+  };
+  std::vector<std::string> flag_answers, env_answers;
+  const std::string flag_log = run({SOFTSHELL_SERVER_EXE, "--port=0", "--nonlinear-reproducible"}, {}, flag_answers);
+  EXPECT_NE(flag_log.find("nonlinear solves: at most 60 s each, reproducible"), std::string::npos) << flag_log;
+  const std::string env_log = run({SOFTSHELL_SERVER_EXE, "--port=0", "--nonlinear-time-limit=30"},
+                                  {{"SOFTSHELL_NONLINEAR_REPRODUCIBLE", "true"}}, env_answers);
+  EXPECT_NE(env_log.find("nonlinear solves: at most 30 s each, reproducible"), std::string::npos) << env_log;
+  ASSERT_EQ(flag_answers.size(), 2u);
+  EXPECT_EQ(flag_answers, env_answers);
+  EXPECT_NE(flag_answers[0], flag_answers[1]);
+
+  std::vector<std::string> timed_answers;
+  const std::string timed_log = run({SOFTSHELL_SERVER_EXE, "--port=0"}, {{"SOFTSHELL_NONLINEAR_REPRODUCIBLE", "0"}},
+                                    timed_answers);
+  EXPECT_NE(timed_log.find("nonlinear solves: at most 60 s each, timed refresh rule"), std::string::npos) << timed_log;
+  Child bad({SOFTSHELL_SERVER_EXE}, {{"SOFTSHELL_NONLINEAR_REPRODUCIBLE", "maybe"}});
+  EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
+  EXPECT_NE(bad.drain_stderr().find("--nonlinear-reproducible"), std::string::npos);
+}
+
 TEST(ServerAppTest, BusyPortIsAnError) {
   TestServer taken;
   Child server({SOFTSHELL_SERVER_EXE, "--host", "127.0.0.1", "--port", std::to_string(taken.port())});

@@ -7,6 +7,8 @@
 #include <cstdlib>
 #include <iostream>
 #include <memory>
+#include <optional>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -67,6 +69,7 @@ struct Options {
   std::string log_level = "info";
   double shutdown_timeout = 5.0;
   double nonlinear_time_limit = softshell::service::ServiceOptions{}.nonlinear.time_limit_seconds;  // its default
+  bool nonlinear_reproducible = false;
   std::string auth_token_file;
   std::string data_dir;
 };
@@ -134,6 +137,12 @@ void add_options(CLI::App& app, Options& o) {
                  "seconds one nonlinear solve may take, 0..3600 (default 60; 0 = no\n"
                  "limit); one that has not converged by then is refused with 422")
       ->envname("SOFTSHELL_NONLINEAR_TIME_LIMIT")->type_name("S")->check(CLI::Range(0.0, 3600.0).description(""));
+  app.add_flag("--nonlinear-reproducible", o.nonlinear_reproducible,
+               "nonlinear solves give the same answers bit for bit to the same\n"
+               "requests however busy the host (for replays and replicas; the\n"
+               "same build and CPU); spot_quadrangulated's drag measured up to a\n"
+               "fifth slower. Off by default")
+      ->envname("SOFTSHELL_NONLINEAR_REPRODUCIBLE");
   app.add_option("--shutdown-timeout", o.shutdown_timeout,
                  "seconds a stop may take to finish what is running, 0..3600\n"
                  "(default 5); then the server exits anyway")
@@ -154,6 +163,13 @@ void add_options(CLI::App& app, Options& o) {
                  "server per DIR) and restore them on start; every result is on\n"
                  "disk before it is answered; default: in memory only")
       ->envname("SOFTSHELL_DATA_DIR")->type_name("DIR");
+}
+
+// Seconds as a person writes them: 60, 0.5.
+std::string format_seconds(double seconds) {
+  std::ostringstream s;
+  s << seconds;
+  return s.str();
 }
 
 // Parses the command line; returns the exit status when the program should stop now (help,
@@ -189,6 +205,7 @@ int main(int argc, char** argv) {
   if (o.solve_threads > 0) service_options.solve_threads = o.solve_threads;
   service_options.precompute_jobs = o.precompute_jobs;
   service_options.nonlinear.time_limit_seconds = o.nonlinear_time_limit;
+  service_options.nonlinear.reproducible = o.nonlinear_reproducible;
   if (o.cache_mb > 0) service_options.cache_bytes = o.cache_mb << 20;
   if (o.store_mb > 0) service_options.store_bytes = o.store_mb << 20;
   if (o.max_body_mb > 0) http_options.max_body_bytes = o.max_body_mb << 20;
@@ -257,6 +274,12 @@ int main(int argc, char** argv) {
     return 1;
   }
   auto svc = std::move(*created);
+  const engine::NonlinearOptions& nonlinear = service_options.nonlinear;
+  logger.info(std::string("nonlinear solves: ") +
+              (nonlinear.time_limit_seconds > 0.0 ? "at most " + format_seconds(nonlinear.time_limit_seconds) + " s each"
+                                                  : "no time limit") +
+              (nonlinear.reproducible ? ", reproducible (counted refresh rule)"
+                                      : ", timed refresh rule (--nonlinear-reproducible: answers that repeat bit for bit)"));
   http::HttpServer server(svc, http_options);
   auto bound = server.start(o.host, o.port);
   if (!bound) {
@@ -272,7 +295,7 @@ int main(int argc, char** argv) {
   while (sem_wait(&g_stop) != 0) {
   }
   const auto name = [](int sig) { return std::string(sig == SIGINT ? "SIGINT" : "SIGTERM"); };
-  logger.info("received " + name(g_signal) + ", stopping (at most " + std::to_string(o.shutdown_timeout) +
+  logger.info("received " + name(g_signal) + ", stopping (at most " + format_seconds(o.shutdown_timeout) +
               " s; a second signal stops at once)");
   // The service stops first: what waits for it is answered and long work is cancelled, so the
   // connections it held can finish. Then the HTTP server ends its connections and streams.
