@@ -30,12 +30,13 @@ struct Drag {
 /// The nonlinear solver's options for the drag benchmarks, with their A/B switches:
 /// SOFTSHELL_BENCH_EXACT_DIRECTIONS (set: exact Newton directions throughout),
 /// SOFTSHELL_BENCH_EARLY_RULE_LEVELS (NonlinearOptions::early_rule_levels; -1 turns it off) and
-/// SOFTSHELL_BENCH_REPRODUCIBLE (set: NonlinearOptions::reproducible, so that a build repeats its
-/// paths exactly and two solvers differ only by what they change, not by the host's timings).
+/// SOFTSHELL_BENCH_TIMED_REFRESH (set: NonlinearOptions::reproducible off, the refresh rule timed,
+/// so that a build's paths follow the host's timings; by default it repeats its paths exactly and
+/// two solvers differ only by what they change).
 inline engine::NonlinearOptions drag_options() {
   engine::NonlinearOptions options;
   options.approximate_directions = std::getenv("SOFTSHELL_BENCH_EXACT_DIRECTIONS") == nullptr;
-  options.reproducible = std::getenv("SOFTSHELL_BENCH_REPRODUCIBLE") != nullptr;
+  options.reproducible = std::getenv("SOFTSHELL_BENCH_TIMED_REFRESH") == nullptr;
   if (const char* levels = std::getenv("SOFTSHELL_BENCH_EARLY_RULE_LEVELS")) options.early_rule_levels = std::atoi(levels);
   return options;
 }

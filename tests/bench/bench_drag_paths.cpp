@@ -3,9 +3,9 @@
 // each step. Where the shell buckles under the grab (spot_quadrangulated), any change to the solver,
 // even one that changes only round-off, sends a drag down another path (other iterations, other
 // refactorizations, sometimes a refusal), so a change is judged on the sum over several paths,
-// never on one drag (docs/benchmarks.md, "Nonlinear model"). One build repeats its paths only
-// roughly: the refresh rule reads the clock, so the host's load changes them. With
-// SOFTSHELL_BENCH_REPRODUCIBLE=1 (NonlinearOptions::reproducible) it repeats them exactly.
+// never on one drag (docs/benchmarks.md, "Nonlinear model"). One build repeats its paths exactly
+// (NonlinearOptions::reproducible); with SOFTSHELL_BENCH_TIMED_REFRESH=1 the refresh rule reads
+// the clock, and the host's load changes them.
 //
 // Usage: bench_drag_paths [mesh = spot_quadrangulated.obj] [paths = 4] [steps = 20] [only path k]
 // Path k pulls along the drag's direction turned by k * 360 / paths degrees about the vertical (y).

@@ -19,8 +19,8 @@
 // Usage: bench_engine [warm solves per mesh = 50] [largest scaling-curve DOFs = 100000, 0 = none]
 //                     [supports: only the support-cost table | nonlinear [steps = 20]: only the nonlinear
 //                      drag | nonlinear drag steps = 20, 0 = none]
-// SOFTSHELL_BENCH_STEPS=1 prints each drag step's statistics; SOFTSHELL_BENCH_REPRODUCIBLE=1 counts
-// instead of timing the refresh rule (NonlinearOptions::reproducible); SOFTSHELL_BENCH_EXACT_DIRECTIONS=1 solves
+// SOFTSHELL_BENCH_STEPS=1 prints each drag step's statistics; SOFTSHELL_BENCH_TIMED_REFRESH=1 times
+// instead of counting the refresh rule (NonlinearOptions::reproducible off); SOFTSHELL_BENCH_EXACT_DIRECTIONS=1 solves
 // the Newton directions on the exact tangent (NonlinearOptions::approximate_directions = false);
 // SOFTSHELL_BENCH_MESH=NAME drags only that mesh. malloc is set up as softshell-server sets it
 // (tune_malloc_for_solves); SOFTSHELL_BENCH_DEFAULT_MALLOC=1 leaves glibc's defaults.

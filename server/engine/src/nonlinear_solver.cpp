@@ -214,9 +214,9 @@ class Run {
   // here and the next solves nearby would be as slow (the trust region's CG, allowed twice as
   // many, is held to the same count). Measured on catmark_righthanded (docs/benchmarks.md): the
   // drag's step p95 83-87 ms instead of 108-115 ms, from rest 141 Krylov iterations instead of 160.
-  // Costs are timed (the last solve's time per iteration, the last refresh's time; a request's
-  // first refresh guessed at two iterations), or with NonlinearOptions::reproducible counted in
-  // Krylov iterations (kRefreshCost), so that the solver's path follows the requests only.
+  // Costs are counted in Krylov iterations (kRefreshCost; NonlinearOptions::reproducible, the
+  // default), so that the solver's path follows the requests only, or timed (the last solve's time
+  // per iteration, the last refresh's time; a request's first refresh guessed at two iterations).
   void refresh_if_slow() {
     const bool stale = last_krylov_ > 2 * kMaxKrylov / 3;
     const bool dear = options_.reproducible

@@ -61,15 +61,16 @@ struct NonlinearOptions {
   /// converges, and is checked, on the model's rule. -1: none. Range -1..8.
   int early_rule_levels = 2;
   /// Decide when to refactor the preconditioner by counting Krylov iterations (a refresh counted
-  /// as 20 per factorization it took) instead of timing them. The same requests then take the
+  /// as 20 per factorization it took) rather than timing them. The same requests then take the
   /// same path to the same answer bit for bit however busy the host (the same build, thread count
-  /// and instruction set), where timed decisions can send a drag past a buckling load to another
-  /// buckled shape from run to run; for servers whose answers must agree with a replay or a
-  /// replica. Measured (docs/benchmarks.md, seventeenth session): catmark_righthanded takes the
-  /// same iterations either way; spot_quadrangulated's drag along 8 directions took about a fifth
-  /// longer (3 paths with a step over 60 s, against 1 timed and 1 refused path). Only
-  /// `time_limit_seconds` still reads the clock.
-  bool reproducible = false;
+  /// and instruction set); timed decisions (false) depend on the host's load, other solves running
+  /// beside this one included, and can send a drag past a buckling load to another buckled shape
+  /// from run to run. Measured (docs/benchmarks.md, seventeenth and eighteenth sessions):
+  /// catmark_righthanded takes the same iterations either way; spot_quadrangulated's drag along 12
+  /// directions took 6.2 s a step counted against 5.4 s timed, within the host's own noise (the 4
+  /// directions measured last: 396 s against 398 s). Only `time_limit_seconds` still reads the
+  /// clock.
+  bool reproducible = true;
   /// If set and it becomes true, a running solve stops at its next iteration with kCancelled
   /// (a server shutting down; the flag must outlive the solver).
   const std::atomic<bool>* cancel = nullptr;
