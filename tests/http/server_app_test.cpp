@@ -212,7 +212,8 @@ TEST(ServerAppTest, StopHasADeadlineAndASecondSignalStopsAtOnce) {
 // --nonlinear-refresh (or its variable): the start's log says which refresh rule nonlinear
 // solves use, and they answer. Two servers on the counted rule (the default, and the variable)
 // give the same bytes to the same drag of a hold. (That the counted rule repeats itself on a
-// slower host is the engine's test, NonlinearSolver.TheCountedRefreshRuleGivesTheSameAnswersOnASlowerHost.)
+// slower host is the engine's test,
+// NonlinearSolver.TheCountedRefreshRuleGivesTheSameAnswersOnASlowerHost.)
 TEST(ServerAppTest, NonlinearRefreshRuleFromTheCommandLineOrTheEnvironment) {
   const auto run = [](std::vector<std::string> args, std::vector<std::pair<std::string, std::string>> env,
                       std::vector<std::string>& answers) {
@@ -220,12 +221,14 @@ TEST(ServerAppTest, NonlinearRefreshRuleFromTheCommandLineOrTheEnvironment) {
     const std::string out = server.read_until("\n", std::chrono::seconds(30));
     const int port = port_of(out.substr(0, out.find('\n')));
     EXPECT_GT(port, 0) << out;
-    if (port > 0) {
-      httplib::Client c("127.0.0.1", port);
-      c.set_read_timeout(std::chrono::seconds(60));
-      auto up = c.Post("/geometries", wire::encode_geometry_binary(exact_grid(), exact_material()).value(), kBin);
-      EXPECT_TRUE(up && up->status == 201);
-      const std::string base = "/geometries/" + wire::decode_upload_response_binary(up->body, true).value().id.hex();
+    httplib::Client c("127.0.0.1", port);
+    c.set_read_timeout(std::chrono::seconds(60));
+    const Reply up =
+        port > 0 ? to_reply(c.Post("/geometries", wire::encode_geometry_binary(exact_grid(), exact_material()).value(), kBin))
+                 : Reply{};
+    EXPECT_EQ(up.status, 201) << up.body;
+    if (up.status == 201) {
+      const std::string base = "/geometries/" + wire::decode_upload_response_binary(up.body, true).value().id.hex();
       for (double pull : {0.2, 0.4}) {  // a hold changed: the second solve starts from the first's answer
         DeformationRequest request;
         request.vertex_constraints = pinned_corners(4);
