@@ -275,13 +275,14 @@ TEST(NonlinearSolver, TheCountedRefreshRuleGivesTheSameAnswersOnASlowerHost) {
     }
     return answers;
   };
+  const auto drag_on_a_slower_host = [&](const NonlinearOptions& options) {
+    const test::ScopedKnob<int> delay(internal::g_tangent_product_delay_us, 1000);
+    return drag(options);
+  };
   const NonlinearOptions counted;
   ASSERT_TRUE(counted.reproducible);  // the default
   const std::vector<NonlinearSolution> quick = drag(counted);
-  const std::vector<NonlinearSolution> slow = [&] {
-    const test::ScopedKnob<int> delay(internal::g_tangent_product_delay_us, 1000);
-    return drag(counted);
-  }();
+  const std::vector<NonlinearSolution> slow = drag_on_a_slower_host(counted);
   ASSERT_EQ(quick.size(), 6u);
   ASSERT_EQ(slow.size(), quick.size());
   int factorizations = 0;
@@ -300,10 +301,7 @@ TEST(NonlinearSolver, TheCountedRefreshRuleGivesTheSameAnswersOnASlowerHost) {
   // The timed rule, on the slow host: the same equilibria.
   NonlinearOptions timed;
   timed.reproducible = false;
-  const std::vector<NonlinearSolution> timed_answers = [&] {
-    const test::ScopedKnob<int> delay(internal::g_tangent_product_delay_us, 1000);
-    return drag(timed);
-  }();
+  const std::vector<NonlinearSolution> timed_answers = drag_on_a_slower_host(timed);
   ASSERT_EQ(timed_answers.size(), quick.size());
   for (size_t k = 0; k < quick.size(); ++k) {
     EXPECT_LT(timed_answers[k].stats.residual, 1e-8);

@@ -245,7 +245,7 @@ TEST(ServerAppTest, NonlinearRefreshRuleFromTheCommandLineOrTheEnvironment) {
     EXPECT_EQ(server.wait(std::chrono::seconds(15)), 0);
     return server.drain_stderr();
   };
-  std::vector<std::string> default_answers, env_answers, timed_answers;
+  std::vector<std::string> default_answers, env_answers, timed_answers, env_timed_answers;
   const std::string default_log = run({SOFTSHELL_SERVER_EXE, "--port=0"}, {}, default_answers);
   EXPECT_NE(default_log.find("nonlinear solves: at most 60 s each, refresh rule counted"), std::string::npos)
       << default_log;
@@ -261,8 +261,9 @@ TEST(ServerAppTest, NonlinearRefreshRuleFromTheCommandLineOrTheEnvironment) {
   EXPECT_NE(timed_log.find("nonlinear solves: at most 60 s each, refresh rule timed"), std::string::npos) << timed_log;
   EXPECT_EQ(timed_answers.size(), 2u);
   const std::string from_env = run({SOFTSHELL_SERVER_EXE, "--port=0"}, {{"SOFTSHELL_NONLINEAR_REFRESH", "timed"}},
-                                   timed_answers);
+                                   env_timed_answers);
   EXPECT_NE(from_env.find("refresh rule timed"), std::string::npos) << from_env;
+  EXPECT_EQ(env_timed_answers.size(), 2u);
   Child bad({SOFTSHELL_SERVER_EXE, "--nonlinear-refresh=sometimes"});
   EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
   EXPECT_NE(bad.drain_stderr().find("--nonlinear-refresh"), std::string::npos);
