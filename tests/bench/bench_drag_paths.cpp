@@ -9,6 +9,8 @@
 //
 // Usage: bench_drag_paths [mesh = spot_quadrangulated.obj] [paths = 4] [steps = 20] [only path k]
 // Path k pulls along the drag's direction turned by k * 360 / paths degrees about the vertical (y).
+// SOFTSHELL_BENCH_STEPS=1 prints every drag step; SOFTSHELL_BENCH_LOAD_STEPS=1 also every load
+// step in it (NonlinearOptions::on_load_step), with the residual at each of its iterations.
 
 #include <algorithm>
 #include <cmath>
@@ -43,9 +45,28 @@ struct PathTotals {
   }
 };
 
-PathTotals drag_path(const bench::Drag& drag, int steps, bool verbose) {
+// One line per load step: where it went along its request, how it ended, what it took, and the
+// exponents of its relative out-of-balance forces (-2.3 is 5e-3), iteration by iteration.
+void print_load_step(const engine::NonlinearLoadStep& s) {
+  std::printf("      load step %.4f -> %.4f %s: %d iterations (%d trust-region), %d Krylov, %d factors, %.0f ms; "
+              "log10 residuals",
+              s.from, s.to, s.converged ? "converged" : "FAILED", s.iterations, s.trust_region_steps,
+              s.krylov_iterations, s.factorizations, s.ms);
+  for (double r : s.residuals) {
+    if (r > 0.0) {
+      std::printf(" %.1f", std::log10(r));
+    } else {
+      std::printf(" -inf");
+    }
+  }
+  std::printf("\n");
+}
+
+PathTotals drag_path(const bench::Drag& drag, int steps, bool verbose, bool load_steps) {
   PathTotals totals;
-  engine::NonlinearSolver solver(drag.model, std::make_shared<engine::FactorCache>(), bench::drag_options());
+  engine::NonlinearOptions options = bench::drag_options();
+  if (load_steps) options.on_load_step = print_load_step;
+  engine::NonlinearSolver solver(drag.model, std::make_shared<engine::FactorCache>(), options);
   DeformationRequest request = drag.request;
   auto first = solver.solve(request);  // the basis and the factor of K, not timed
   if (!first.ok()) {
@@ -91,7 +112,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%s: %s\n", name.c_str(), drag.error().message.c_str());
     return 1;
   }
-  const bool verbose = std::getenv("SOFTSHELL_BENCH_STEPS") != nullptr;
+  const bool load_steps = std::getenv("SOFTSHELL_BENCH_LOAD_STEPS") != nullptr;
+  const bool verbose = load_steps || std::getenv("SOFTSHELL_BENCH_STEPS") != nullptr;
   std::printf("%s, %d DOFs: the grab dragged to 30%% of the size in %d steps, %d paths (%s)\n\n", name.c_str(),
               drag->model->num_dofs(), steps, paths, bench::machine().c_str());
   std::printf("| path | direction | steps | total | step p50 | step max | Newton | Krylov | factors | load steps |\n");
@@ -103,7 +125,7 @@ int main(int argc, char** argv) {
     bench::Drag path = *drag;
     const Vec3& d = drag->direction;
     path.direction = Vec3(std::cos(turn) * d.x() + std::sin(turn) * d.z(), 0.0, -std::sin(turn) * d.x() + std::cos(turn) * d.z());
-    const PathTotals t = drag_path(path, steps, verbose);
+    const PathTotals t = drag_path(path, steps, verbose, load_steps);
     char where[64];
     std::snprintf(where, sizeof where, "(%.2f, 0, %.2f)", path.direction.x(), path.direction.z());
     std::printf("| %d | %s | %d%s | %.2f s | %.0f ms | %.0f ms | %d | %d | %d | %d |\n", k, where, t.steps,

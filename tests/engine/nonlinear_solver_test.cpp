@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
@@ -362,6 +363,84 @@ TEST(NonlinearSolver, AFailedLoadStepIsTriedAgainAtHalfItsLength) {
   }
   EXPECT_EQ(g_load_steps.back().to, 1.0);
   EXPECT_FALSE(g_load_steps.back().failed);
+}
+
+// NonlinearOptions::on_load_step sees every load step as it ends, and what they report adds up to
+// the solve's own counts: here the helmet's grab with its first two attempts at the end failed by
+// the test hook (so split), then every load step failed (refused).
+TEST(NonlinearSolver, TheLoadStepObserverSeesEveryLoadStep) {
+  const ControlMesh helmet = test::load_asset_mesh("catmark_helmet.obj");
+  auto model = ShellModel::build(helmet, material()).value();
+  DeformationRequest request = helmet_grab(helmet);
+  request.limit_constraints[0].displacement *= 0.05;
+  static std::vector<NonlinearLoadStep> seen;
+  NonlinearOptions options;
+  options.on_load_step = [](const NonlinearLoadStep& step) { seen.push_back(step); };
+  NonlinearSolver solver(model, std::make_shared<FactorCache>(), options);
+  seen.clear();
+  g_failing_ends = 2;
+  auto answer = [&] {
+    const test::ScopedKnob<internal::LoadStepFilter> filter(internal::g_fail_load_step, +[](double, double to) {
+      const bool fail = to == 1.0 && g_failing_ends > 0;
+      if (fail) --g_failing_ends;
+      return fail;
+    });
+    return solver.solve(request);
+  }();
+  ASSERT_TRUE(answer.ok()) << answer.error().message;
+  const NonlinearStats& stats = answer->stats;
+  ASSERT_EQ(static_cast<int>(seen.size()), stats.load_steps);
+  int iterations = 0, trust = 0, krylov = 0, factorizations = 0, failed = 0;
+  double lambda = 0.0;  // where the next load step starts
+  for (size_t k = 0; k < seen.size(); ++k) {
+    const NonlinearLoadStep& step = seen[k];
+    iterations += step.iterations;
+    trust += step.trust_region_steps;
+    krylov += step.krylov_iterations;
+    factorizations += step.factorizations;
+    EXPECT_EQ(step.from, lambda) << "load step " << k;
+    EXPECT_GT(step.to, step.from) << "load step " << k;
+    EXPECT_GE(step.ms, 0.0);
+    if (!step.converged) {
+      ++failed;  // by the hook, before any iteration
+      EXPECT_EQ(step.iterations, 0);
+      EXPECT_TRUE(step.residuals.empty());
+      continue;
+    }
+    lambda = step.to;
+    ASSERT_FALSE(step.residuals.empty()) << "load step " << k;
+    EXPECT_GE(static_cast<int>(step.residuals.size()), step.iterations + 1) << "load step " << k;
+    EXPECT_LE(step.residuals.back(), step.to < 1.0 ? 1e-2 : 1e-8) << "load step " << k;
+  }
+  EXPECT_EQ(failed, 2);
+  EXPECT_EQ(lambda, 1.0);
+  EXPECT_GE(seen.size(), 4u);
+  EXPECT_EQ(seen.back().residuals.back(), stats.residual);
+  EXPECT_EQ(iterations, stats.iterations);
+  EXPECT_EQ(trust, stats.trust_region_steps);
+  EXPECT_EQ(krylov, stats.krylov_iterations);
+  EXPECT_LE(factorizations, stats.factorizations);  // (the first factor is made before any load step)
+  EXPECT_GE(factorizations, 1);
+
+  // A refused request: its load steps are reported too, each half the one before, down to the
+  // smallest the solver tries, 1/1024 of the request (from rest the first load step is chosen
+  // from the linear estimate, here about 0.65 of the request).
+  NonlinearSolver refusing(model, std::make_shared<FactorCache>(), options);
+  seen.clear();
+  auto refused = [&] {
+    const test::ScopedKnob<int> fail(internal::g_fail_load_steps, 1000);
+    return refusing.solve(request);
+  }();
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kUnprocessable);
+  ASSERT_GE(seen.size(), 2u);
+  for (size_t k = 0; k < seen.size(); ++k) {
+    EXPECT_FALSE(seen[k].converged);
+    EXPECT_EQ(seen[k].from, 0.0);
+    if (k > 0) EXPECT_EQ(seen[k].to, 0.5 * seen[k - 1].to) << "load step " << k;
+  }
+  EXPECT_GE(seen.back().to, 1.0 / 1024.0);
+  EXPECT_LT(0.5 * seen.back().to, 1.0 / 1024.0);
 }
 
 // Newton that has come near an answer and then stops making progress (on spot_quadrangulated's

@@ -240,6 +240,22 @@ class Run {
     fresh_ = false;
   }
   double check_answer(const Eigen::VectorXd& u);
+  // NonlinearOptions::on_load_step, with what the load step from `from` to `to` added to `before`.
+  void report_load_step(double from, double to, bool converged, const NonlinearStats& before,
+                        Clock::time_point started) {
+    NonlinearLoadStep step;
+    step.from = from;
+    step.to = to;
+    step.converged = converged;
+    step.iterations = stats_.iterations - before.iterations;
+    step.trust_region_steps = stats_.trust_region_steps - before.trust_region_steps;
+    step.krylov_iterations = stats_.krylov_iterations - before.krylov_iterations;
+    step.factorizations = stats_.factorizations - before.factorizations;
+    step.residuals = std::move(step_residuals_);
+    step_residuals_.clear();
+    step.ms = ms_between(started, Clock::now());
+    options_.on_load_step(step);
+  }
   [[noreturn]] void give_up(double lambda, const std::string& why) const;
 
   std::shared_ptr<const ShellModel> model_;
@@ -253,6 +269,7 @@ class Run {
   std::unique_ptr<internal::Reactions> reactions_;
   std::unique_ptr<internal::PrescribedPath> path_of_fixed_;
   Eigen::VectorXd u0_, r0_, d0_;
+  std::vector<double> step_residuals_;  // of the current load step, for NonlinearOptions::on_load_step
   Eigen::VectorXd targets_;  // prescribed values, row values and loads of the request
   std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>> history_;  // of the drag this solve continues
   Eigen::VectorXd path_;     // predicted du / dlambda (empty: none)
@@ -706,6 +723,7 @@ bool Run::solve_step(double from, double lambda, double tolerance) {
   last_krylov_ = 0;
   excess_krylov_ms_ = 0.0;
   excess_krylov_ = 0;
+  step_residuals_.clear();
   if (state_.displacement.size() != u_.size() || state_.displacement != u_) {
     if (!evaluate(u_, state_)) return false;
     fresh_ = false;
@@ -734,6 +752,7 @@ bool Run::solve_step(double from, double lambda, double tolerance) {
     const double out = reactions_->out_of_balance(r).norm(), scale = force_scale(state_, lambda);
     const bool rows_ok = rows_met(g, u_);
     last_residual_ = out / scale;
+    if (options_.on_load_step) step_residuals_.push_back(last_residual_);
     if (early_ && rows_ok && last_residual_ <= tolerance) {
       if (intermediate) return true;
       leave_early();
@@ -1006,7 +1025,12 @@ NonlinearSolution Run::run() {
       path_ = (u2 - u1) / (l2 - l1);
     }
     if (path_.size() == ndof) u_ = u_start + (target - lambda) * path_;
-    if (solve_step(lambda, target, target < 1.0 ? std::max(kStepTolerance, options_.tolerance) : options_.tolerance)) {
+    const NonlinearStats before = stats_;
+    const auto step_start = Clock::now();
+    const bool converged_step =
+        solve_step(lambda, target, target < 1.0 ? std::max(kStepTolerance, options_.tolerance) : options_.tolerance);
+    if (options_.on_load_step) report_load_step(lambda, target, converged_step, before, step_start);
+    if (converged_step) {
       lambda = target;
       reached_ = std::max(reached_, target);
       step = std::min(1.0, 2.0 * step);

@@ -5,8 +5,10 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -22,6 +24,26 @@ namespace internal {
 class NonlinearShell;
 struct NonlinearMemory;
 }  // namespace internal
+
+/// One load step of a nonlinear solve, as NonlinearOptions::on_load_step sees it when it ends.
+/// A request is a homotopy from the solve's start (0) to what it asks (1), taken in one load step
+/// when Newton converges from the start, else in several; a load step that does not converge is
+/// tried again at half its length from the same start (or the request is refused).
+struct NonlinearLoadStep {
+  double from = 0.0;      ///< where it started along the request, 0..1
+  double to = 0.0;        ///< where it was to end (converged: where the next one starts)
+  bool converged = false;
+  int32_t iterations = 0;          ///< nonlinear iterations (directions computed)
+  int32_t trust_region_steps = 0;  ///< of which trust-region steps
+  int32_t krylov_iterations = 0;
+  int32_t factorizations = 0;
+  /// The relative out-of-balance force each time the iteration measured it, in order (at each
+  /// iteration's start; a state measured again on another quadrature rule appears twice). The
+  /// last entry is where the load step ended. The first of a drag step that starts from the last
+  /// answer is tiny: that state met the last request (the next direction moves the grab).
+  std::vector<double> residuals;
+  double ms = 0.0;
+};
 
 /// Limits and tolerances of a nonlinear solve.
 struct NonlinearOptions {
@@ -78,6 +100,12 @@ struct NonlinearOptions {
   /// at its next iteration and is refused like one that reached the iteration limit
   /// (kUnprocessable, with how far it got and what to try). The service sets 60 s.
   double time_limit_seconds = 0.0;
+  /// Called on the solving thread after each load step ends, converged or not (a refused
+  /// request's too, but for a load step stopped by the time limit or a cancellation): where a solve spends its
+  /// iterations, for benchmarks and for diagnosing slow or refused requests (`bench_drag_paths`
+  /// prints them with SOFTSHELL_BENCH_LOAD_STEPS=1). It must not call back into the solver.
+  /// Empty: nothing is recorded.
+  std::function<void(const NonlinearLoadStep&)> on_load_step;
 };
 
 /// What a nonlinear solve did.
