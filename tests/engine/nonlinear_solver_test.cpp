@@ -437,7 +437,9 @@ TEST(NonlinearSolver, TheLoadStepObserverSeesEveryLoadStep) {
   for (size_t k = 0; k < seen.size(); ++k) {
     EXPECT_FALSE(seen[k].converged);
     EXPECT_EQ(seen[k].from, 0.0);
-    if (k > 0) EXPECT_EQ(seen[k].to, 0.5 * seen[k - 1].to) << "load step " << k;
+    if (k > 0) {
+      EXPECT_EQ(seen[k].to, 0.5 * seen[k - 1].to) << "load step " << k;
+    }
   }
   EXPECT_GE(seen.back().to, 1.0 / 1024.0);
   EXPECT_LT(0.5 * seen.back().to, 1.0 / 1024.0);
