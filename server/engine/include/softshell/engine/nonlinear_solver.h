@@ -42,7 +42,7 @@ struct NonlinearLoadStep {
   /// last entry is where the load step ended. The first of a drag step that starts from the last
   /// answer is tiny: that state met the last request (the next direction moves the grab).
   std::vector<double> residuals;
-  double ms = 0.0;
+  double ms = 0.0;  ///< wall-clock time of the load step
 };
 
 /// Limits and tolerances of a nonlinear solve.
@@ -101,9 +101,10 @@ struct NonlinearOptions {
   /// (kUnprocessable, with how far it got and what to try). The service sets 60 s.
   double time_limit_seconds = 0.0;
   /// Called on the solving thread after each load step ends, converged or not (a refused
-  /// request's too, but for a load step stopped by the time limit or a cancellation): where a solve spends its
-  /// iterations, for benchmarks and for diagnosing slow or refused requests (`bench_drag_paths`
-  /// prints them with SOFTSHELL_BENCH_LOAD_STEPS=1). It must not call back into the solver.
+  /// request's too, but for a load step stopped by the time limit or a cancellation): where a
+  /// solve spends its iterations, for benchmarks and for diagnosing slow or refused requests
+  /// (`bench_drag_paths` prints them with SOFTSHELL_BENCH_LOAD_STEPS=1). Solves running at once
+  /// call it at once, each from its own thread; it must not call back into the solver.
   /// Empty: nothing is recorded.
   std::function<void(const NonlinearLoadStep&)> on_load_step;
 };
