@@ -373,9 +373,9 @@ TEST(NonlinearSolver, TheLoadStepObserverSeesEveryLoadStep) {
   auto model = ShellModel::build(helmet, material()).value();
   DeformationRequest request = helmet_grab(helmet);
   request.limit_constraints[0].displacement *= 0.05;
-  static std::vector<NonlinearLoadStep> seen;
+  std::vector<NonlinearLoadStep> seen;
   NonlinearOptions options;
-  options.on_load_step = [](const NonlinearLoadStep& step) { seen.push_back(step); };
+  options.on_load_step = [&seen](const NonlinearLoadStep& step) { seen.push_back(step); };
   NonlinearSolver solver(model, std::make_shared<FactorCache>(), options);
   seen.clear();
   g_failing_ends = 2;

@@ -269,7 +269,8 @@ class Run {
   std::unique_ptr<internal::Reactions> reactions_;
   std::unique_ptr<internal::PrescribedPath> path_of_fixed_;
   Eigen::VectorXd u0_, r0_, d0_;
-  std::vector<double> step_residuals_;  // of the current load step, for NonlinearOptions::on_load_step
+  // Of the current load step, for NonlinearOptions::on_load_step (emptied by report_load_step).
+  std::vector<double> step_residuals_;
   Eigen::VectorXd targets_;  // prescribed values, row values and loads of the request
   std::vector<std::pair<Eigen::VectorXd, Eigen::VectorXd>> history_;  // of the drag this solve continues
   Eigen::VectorXd path_;     // predicted du / dlambda (empty: none)
@@ -723,7 +724,6 @@ bool Run::solve_step(double from, double lambda, double tolerance) {
   last_krylov_ = 0;
   excess_krylov_ms_ = 0.0;
   excess_krylov_ = 0;
-  step_residuals_.clear();
   if (state_.displacement.size() != u_.size() || state_.displacement != u_) {
     if (!evaluate(u_, state_)) return false;
     fresh_ = false;
