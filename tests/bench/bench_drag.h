@@ -4,6 +4,7 @@
 // points held, a grab (limit constraint) at the centre of the topmost face, dragged across the
 // object's thinnest horizontal extent (out of the plane of a flat object) to 30% of its size.
 
+#include <cstdio>
 #include <cstdlib>
 #include <memory>
 
@@ -38,13 +39,29 @@ inline engine::NonlinearOptions drag_options() {
   options.approximate_directions = std::getenv("SOFTSHELL_BENCH_EXACT_DIRECTIONS") == nullptr;
   options.reproducible = std::getenv("SOFTSHELL_BENCH_TIMED_REFRESH") == nullptr;
   if (const char* levels = std::getenv("SOFTSHELL_BENCH_EARLY_RULE_LEVELS")) options.early_rule_levels = std::atoi(levels);
+  if (const char* points = std::getenv("SOFTSHELL_BENCH_TANGENT_GAUSS_POINTS")) options.tangent_gauss_points = std::atoi(points);
   return options;
+}
+
+/// kMaterial, or its thickness from SOFTSHELL_BENCH_THICKNESS_MM (0.1..100 mm on the 1 m object):
+/// how the drag's cost depends on how slender the shell is.
+inline Material drag_material() {
+  Material material = kMaterial;
+  if (const char* mm = std::getenv("SOFTSHELL_BENCH_THICKNESS_MM")) {
+    const double t = std::atof(mm);
+    if (!(t >= 0.1 && t <= 100.0)) {
+      std::fprintf(stderr, "SOFTSHELL_BENCH_THICKNESS_MM must be 0.1..100 (got '%s')\n", mm);
+      std::exit(2);
+    }
+    material.thickness = 1e-3 * t;
+  }
+  return material;
 }
 
 inline Result<Drag> setup_drag(ControlMesh mesh) {
   const double scale = 1.0 / mesh.bounding_diagonal();
   for (Vec3& p : mesh.positions()) p *= scale;
-  auto model = engine::ShellModel::build(mesh, kMaterial);
+  auto model = engine::ShellModel::build(mesh, drag_material());
   if (!model.ok()) return model.error();
   Drag drag;
   drag.model = *model;

@@ -114,8 +114,9 @@ int main(int argc, char** argv) {
   }
   const bool load_steps = std::getenv("SOFTSHELL_BENCH_LOAD_STEPS") != nullptr;
   const bool verbose = load_steps || std::getenv("SOFTSHELL_BENCH_STEPS") != nullptr;
-  std::printf("%s, %d DOFs: the grab dragged to 30%% of the size in %d steps, %d paths (%s)\n\n", name.c_str(),
-              drag->model->num_dofs(), steps, paths, bench::machine().c_str());
+  std::printf("%s, %d DOFs, t = %g mm: the grab dragged to 30%% of the size in %d steps, %d paths (%s)\n\n",
+              name.c_str(), drag->model->num_dofs(), 1e3 * bench::drag_material().thickness, steps, paths,
+              bench::machine().c_str());
   std::printf("| path | direction | steps | total | step p50 | step max | Newton | Krylov | factors | load steps |\n");
   std::printf("| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   std::fflush(stdout);
