@@ -30,7 +30,8 @@ struct Drag {
 
 /// The nonlinear solver's options for the drag benchmarks, with their A/B switches:
 /// SOFTSHELL_BENCH_EXACT_DIRECTIONS (set: exact Newton directions throughout),
-/// SOFTSHELL_BENCH_EARLY_RULE_LEVELS (NonlinearOptions::early_rule_levels; -1 turns it off) and
+/// SOFTSHELL_BENCH_EARLY_RULE_LEVELS (NonlinearOptions::early_rule_levels; -1 turns it off),
+/// SOFTSHELL_BENCH_TANGENT_GAUSS_POINTS (NonlinearOptions::tangent_gauss_points) and
 /// SOFTSHELL_BENCH_TIMED_REFRESH (set: NonlinearOptions::reproducible off, the refresh rule timed,
 /// so that a build's paths follow the host's timings; by default it repeats its paths exactly and
 /// two solvers differ only by what they change).

@@ -11,6 +11,7 @@
 // Path k pulls along the drag's direction turned by k * 360 / paths degrees about the vertical (y).
 // SOFTSHELL_BENCH_STEPS=1 prints every drag step; SOFTSHELL_BENCH_LOAD_STEPS=1 also every load
 // step in it (NonlinearOptions::on_load_step), with the residual at each of its iterations.
+// SOFTSHELL_BENCH_THICKNESS_MM sets the shell's thickness (bench_drag.h; the benchmark's is 2 mm).
 
 #include <algorithm>
 #include <cmath>
