@@ -9,6 +9,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <tuple>
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -297,6 +298,65 @@ TEST(CholeskyFactor, SweepsOnTwoThreadsSolveAsOnOne) {
   const Eigen::MatrixXd y = f->forward(local, &fraction, &pool);
   EXPECT_LT(fraction, 0.5);
   EXPECT_LT(relative_error(f->backward(y, &pool), reference.solve(local)), 1e-11);
+}
+
+// The numeric factorization on two threads (supernodal_numeric.h: both halves of the tree at once,
+// then the top): the same factor bit for bit as on one thread, for a fresh analysis and a reused
+// one, and the same refusal (the same column, the same finiteness) wherever the failing pivot lies,
+// in a half or in the top.
+TEST(CholeskyFactor, FactorsOnTwoThreadsBitForBitAsOnOne) {
+  const ScopedKnob<int64_t> plan_any_size(g_two_thread_sweep_entries, 0);
+  const Eigen::Matrix3d block = node_block();
+  const int nx = 40, ny = 36;
+  const Sparse a = with_blocks(grid_laplacian(nx, ny, 0.05), block);
+  ThreadPool pool(2);
+  auto factor = [&](const Sparse& m, const CholeskyFactor* same_pattern, bool two_threads,
+                    CholeskyFactor::Failure& failure) {
+    return CholeskyFactor::factorize(upper_of(m), same_pattern, failure, two_threads ? &pool : nullptr);
+  };
+  CholeskyFactor::Failure failure;
+  const auto one = factor(a, nullptr, false, failure);
+  const auto two = factor(a, nullptr, true, failure);
+  ASSERT_TRUE(one && two);
+  ASSERT_TRUE(two->two_thread_sweeps()) << "a grid's elimination tree splits into two halves";
+  const Eigen::MatrixXd b = random_rhs(a.rows(), 2, 21);
+  // Sweeps on one thread read every entry of L: equal answers, bit for bit, mean equal factors.
+  EXPECT_TRUE(one->forward(b) == two->forward(b));
+  EXPECT_TRUE(one->backward(b) == two->backward(b));
+  EXPECT_LT(relative_error(two->backward(two->forward(b)), Eigen::SimplicialLLT<Sparse>(a).solve(b)), 1e-11);
+  // Another matrix of the pattern, into the same analysis.
+  const Sparse shifted = with_scaled_diagonal(a, 1.5);
+  const auto one_again = factor(shifted, one.get(), false, failure);
+  const auto two_again = factor(shifted, two.get(), true, failure);
+  ASSERT_TRUE(one_again && two_again);
+  EXPECT_TRUE(one_again->forward(b) == two_again->forward(b));
+  {
+    // Off: one thread even with the executor.
+    const ScopedKnob<bool> off(g_two_thread_factorization, false);
+    const auto alone = factor(a, nullptr, true, failure);
+    ASSERT_TRUE(alone);
+    EXPECT_TRUE(alone->forward(b) == one->forward(b));
+  }
+  // Failing pivots: along the middle column of nodes (the top separator of the grid's nested
+  // dissection, whatever the ordering) and off it, in both halves.
+  int refused = 0;
+  for (const auto& [i, j, nan] : {std::tuple{nx / 2, ny / 2, false}, std::tuple{nx / 2, 3, false},
+                                  std::tuple{nx / 2 - 1, ny - 2, false}, std::tuple{3, 5, false},
+                                  std::tuple{nx - 4, ny - 6, false}, std::tuple{7, ny / 2, true},
+                                  std::tuple{nx - 2, 1, true}, std::tuple{nx / 2, ny / 3, true}}) {
+    SCOPED_TRACE(testing::Message() << "node (" << i << ", " << j << ")" << (nan ? ", NaN" : ", negative"));
+    Sparse bad = a;
+    const int dof = 3 * (j * nx + i) + 1;
+    bad.coeffRef(dof, dof) = nan ? std::numeric_limits<double>::quiet_NaN() : -1.0;
+    CholeskyFactor::Failure on_one, on_two;
+    EXPECT_FALSE(factor(bad, nullptr, false, on_one));
+    EXPECT_FALSE(factor(bad, two.get(), true, on_two));
+    EXPECT_EQ(on_two.column, on_one.column);
+    EXPECT_EQ(on_two.not_finite, on_one.not_finite);
+    EXPECT_EQ(on_one.not_finite, nan);
+    refused += on_one.column >= 0;
+  }
+  EXPECT_EQ(refused, 8);
 }
 
 // A factor's layout by hand, one column per supernode: column k's rows below it are `below[k]`.

@@ -274,7 +274,8 @@ CholeskyFactor::~CholeskyFactor() = default;
 const char* CholeskyFactor::backend() { return "CHOLMOD supernodal"; }
 
 std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMatrix<double>& upper,
-                                                          const CholeskyFactor* same_pattern, Failure& failure) {
+                                                          const CholeskyFactor* same_pattern, Failure& failure,
+                                                          Executor* executor) {
   failure = Failure{};
   // A view of `upper` as a cholmod_sparse (stype 1: the upper triangle is read); CHOLMOD does not
   // write to its input.
@@ -319,7 +320,7 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
       if (ok) {
         const SupernodalOutcome outcome =
             factor_supernodes(state->plan->layout(l), factor_order_entries(upper, state->plan->position),
-                              upper.valuePtr(), static_cast<double*>(l->x));
+                              upper.valuePtr(), static_cast<double*>(l->x), state->plan->sweeps.get(), executor);
         l->is_ll = 1;
         l->minor = outcome.failed_column >= 0 ? static_cast<size_t>(outcome.failed_column) : l->n;
         ok = outcome.failed_column < 0;

@@ -294,7 +294,8 @@ CholeskyFactor::~CholeskyFactor() = default;
 const char* CholeskyFactor::backend() { return "supernodal LL^T on Eigen's AMD (GPL-free)"; }
 
 std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMatrix<double>& upper,
-                                                          const CholeskyFactor* same_pattern, Failure& failure) {
+                                                          const CholeskyFactor* same_pattern, Failure& failure,
+                                                          Executor* executor) {
   failure = Failure{};
   try {
     auto state = std::make_unique<State>();
@@ -308,7 +309,8 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
     }
     const Symbolic& s = *state->symbolic;
     state->values.resize(static_cast<size_t>(s.value_start.back()));
-    const SupernodalOutcome outcome = factor_supernodes(layout(s, nullptr), entries, upper.valuePtr(), state->values.data());
+    const SupernodalOutcome outcome =
+        factor_supernodes(layout(s, nullptr), entries, upper.valuePtr(), state->values.data(), s.sweeps.get(), executor);
     if (outcome.failed_column >= 0) {
       failure.column = s.original[static_cast<size_t>(outcome.failed_column)];
       failure.not_finite = outcome.not_finite;

@@ -39,8 +39,11 @@ class CholeskyFactor {
   /// upper pattern; the caller guarantees it), its ordering and symbolic analysis are reused and
   /// only the numeric factorization runs. Returns null, and says why in `failure`, if A is not
   /// positive definite, holds NaN or infinite values (never a factor with NaNs), or memory ran out.
+  /// With an executor of two threads or more, a large factor is filled on two of them (the
+  /// same values bit for bit as on one: supernodal_numeric.h).
   static std::unique_ptr<CholeskyFactor> factorize(const Eigen::SparseMatrix<double>& upper,
-                                                   const CholeskyFactor* same_pattern, Failure& failure);
+                                                   const CholeskyFactor* same_pattern, Failure& failure,
+                                                   Executor* executor = nullptr);
   ~CholeskyFactor();
   CholeskyFactor(const CholeskyFactor&) = delete;
   CholeskyFactor& operator=(const CholeskyFactor&) = delete;

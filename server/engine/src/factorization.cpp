@@ -99,7 +99,7 @@ void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factor
       same_pattern && same_pattern->factor_ && same_pattern->pattern_hash_ == pattern_hash_ ? same_pattern->factor_.get()
                                                                                           : nullptr;
   CholeskyFactor::Failure failure;
-  factor_ = CholeskyFactor::factorize(a, reuse, failure);
+  factor_ = CholeskyFactor::factorize(a, reuse, failure, executor_.get());
   if (!factor_) {
     if (failure.out_of_memory) fail(ErrorCode::kResourceExhausted, "not enough memory to factorize K");
     const int32_t dof = failure.column >= 0 && static_cast<size_t>(failure.column) < factored_.size()

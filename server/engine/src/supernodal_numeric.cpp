@@ -3,12 +3,13 @@
 #include "supernodal_numeric.h"
 
 #include <algorithm>
+#include <array>
 
 namespace softshell::engine::internal {
 namespace {
 
-using Kernel = SupernodalOutcome (*)(const SupernodalLayout&, const int64_t*, const int32_t*, const int32_t*,
-                                     const double*, double*);
+using Kernel = SupernodalOutcome (*)(const SupernodalLayout&, const SupernodalInput&, const int32_t*, int64_t,
+                                     const SupernodalScratch*, int, SupernodalLinks, double*);
 
 // Picked once, when the library loads.
 Kernel choose_kernel() {
@@ -29,6 +30,7 @@ Kernel kernel() {
 }  // namespace
 
 std::atomic<bool> g_supernodal_baseline_kernels{false};
+std::atomic<bool> g_two_thread_factorization{true};
 
 FactorOrderEntries factor_order_entries(const Eigen::SparseMatrix<double>& upper, const std::vector<int32_t>& position) {
   const auto n = static_cast<size_t>(upper.rows());
@@ -58,8 +60,55 @@ FactorOrderEntries factor_order_entries(const Eigen::SparseMatrix<double>& upper
 }
 
 SupernodalOutcome factor_supernodes(const SupernodalLayout& layout, const FactorOrderEntries& entries,
-                                    const double* a_values, double* values) {
-  return kernel()(layout, entries.start.data(), entries.row.data(), entries.value.data(), a_values, values);
+                                    const double* a_values, double* values, const TwoThreadSweeps* split,
+                                    Executor* executor) {
+  const Kernel factor = kernel();
+  const SupernodalInput a{entries.start.data(), entries.row.data(), entries.value.data(), a_values};
+  const auto ns = static_cast<size_t>(layout.supernodes);
+  const auto columns = static_cast<size_t>(layout.columns());
+  std::vector<int32_t> link(ns, -1);
+  std::vector<int64_t> next_row(ns, 0), pushed_at(ns, -1);
+  const SupernodalLinks links{link.data(), next_row.data(), pushed_at.data()};
+  if (!on_two_threads(split, executor) || !g_two_thread_factorization.load(std::memory_order_relaxed)) {
+    std::vector<int32_t> order(ns), head(ns, -1), map(columns, 0);
+    for (size_t t = 0; t < ns; ++t) order[t] = static_cast<int32_t>(t);
+    const SupernodalScratch scratch{head.data(), map.data()};
+    return factor(layout, a, order.data(), static_cast<int64_t>(ns), &scratch, 1, links, values);
+  }
+  // Both halves of the tree at once (their supernodes' descendants are their own), then the top,
+  // which gathers from its own list and both halves' (supernodal_sweeps.h: the same split).
+  std::array<std::vector<int32_t>, 3> head, map;
+  std::array<SupernodalScratch, 3> scratch;
+  for (size_t h = 0; h < 3; ++h) {
+    head[h].assign(ns, -1);
+    map[h].assign(columns, 0);
+    scratch[h] = {head[h].data(), map[h].data()};
+  }
+  std::array<SupernodalOutcome, 2> halves;
+  executor->parallel_for(0, 2, [&](int64_t h) {
+    const std::vector<int32_t>& order = split->half(static_cast<int>(h));
+    halves[static_cast<size_t>(h)] = factor(layout, a, order.data(), static_cast<int64_t>(order.size()),
+                                            &scratch[static_cast<size_t>(h)], 1, links, values);
+  }, 2);
+  // A failed half stops the factorization at its failing supernode; the top's supernodes before
+  // it are factored still, so that the failure reported is the first in the order of the columns,
+  // as on one thread.
+  int64_t stop = layout.columns();
+  const SupernodalOutcome* failed = nullptr;
+  for (const SupernodalOutcome& o : halves) {
+    if (o.failed_column >= 0 && o.failed_column < stop) {
+      stop = o.failed_column;
+      failed = &o;
+    }
+  }
+  const std::vector<int32_t>& top = split->top();
+  int64_t count = 0;
+  while (count < static_cast<int64_t>(top.size()) && layout.first[top[static_cast<size_t>(count)]] < stop) ++count;
+  const std::array<SupernodalScratch, 3> lists{scratch[2], scratch[0], scratch[1]};
+  SupernodalOutcome outcome = factor(layout, a, top.data(), count, lists.data(), 3, links, values);
+  if (outcome.failed_column < 0 && failed) outcome = *failed;
+  if (outcome.failed_column < 0) outcome.min_diagonal = std::min({outcome.min_diagonal, halves[0].min_diagonal, halves[1].min_diagonal});
+  return outcome;
 }
 
 const char* supernodal_kernels() {

@@ -28,17 +28,25 @@ using Block = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
 using ConstBlock = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
 
 // Left-looking: supernode t gathers the updates of every descendant d with rows in t's columns
-// (d waits in t's list, `head`, until then; `next_row` is where d's rows in t begin), then factors
+// (d waits in one of t's lists until then; `next_row` is where d's rows in t begin), then factors
 // its diagonal block and solves for the rows below it.
-SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const int64_t* start, const int32_t* row,
-                                         const int32_t* value, const double* a_values, double* values) {
+SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const SupernodalInput& a, const int32_t* order,
+                                         int64_t count, const SupernodalScratch* heads, int lists,
+                                         SupernodalLinks links, double* values) {
   SupernodalOutcome outcome;
-  const auto ns = static_cast<size_t>(l.supernodes);
-  std::vector<int32_t> head(ns, -1), link(ns, -1), map(static_cast<size_t>(l.columns()), 0);
-  std::vector<int64_t> next_row(ns, 0);
+  int32_t* const head = heads[0].head;
+  int32_t* const map = heads[0].map;
   std::vector<double> update;  // the largest descendant update so far
+  std::vector<int32_t> waiting;  // t's descendants, merged from several lists
   double low = std::numeric_limits<double>::infinity();
-  for (size_t t = 0; t < ns; ++t) {
+  // Puts d into target's list (in heads[0]) while t is factored.
+  auto wait_for = [&](int32_t d, size_t target, int64_t t) {
+    links.link[static_cast<size_t>(d)] = head[target];
+    links.pushed_at[static_cast<size_t>(d)] = t;
+    head[target] = d;
+  };
+  for (int64_t i_t = 0; i_t < count; ++i_t) {
+    const auto t = static_cast<size_t>(order[i_t]);
     const int32_t k1 = l.first[t], k2 = l.first[t + 1];
     const Eigen::Index ncols = k2 - k1, nrows = l.row_start[t + 1] - l.row_start[t];
     const int32_t* rows = l.rows + l.row_start[t];
@@ -47,14 +55,36 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const int64_
     std::fill(block, block + nrows * ncols, 0.0);
     Block lt(block, nrows, ncols, Eigen::OuterStride<>(nrows));
     for (int32_t j = k1; j < k2; ++j) {
-      for (int64_t q = start[j]; q < start[j + 1]; ++q) lt(map[static_cast<size_t>(row[q])], j - k1) += a_values[value[q]];
+      for (int64_t q = a.start[j]; q < a.start[j + 1]; ++q) lt(map[static_cast<size_t>(a.row[q])], j - k1) += a.a_values[a.value[q]];
     }
-    for (int32_t d = head[t]; d >= 0;) {
+    // The descendants in the order one thread over the whole tree takes them: its single list,
+    // last in first out, is the lists merged by when each was put in, the latest first.
+    waiting.clear();
+    if (lists == 1) {
+      for (int32_t d = head[t]; d >= 0; d = links.link[static_cast<size_t>(d)]) waiting.push_back(d);
+    } else {
+      int32_t at[4] = {-1, -1, -1, -1};
+      for (int h = 0; h < lists; ++h) at[h] = heads[h].head[t];
+      for (;;) {
+        int pick = -1;
+        for (int h = 0; h < lists; ++h) {
+          if (at[h] >= 0 && (pick < 0 || links.pushed_at[static_cast<size_t>(at[h])] >
+                                             links.pushed_at[static_cast<size_t>(at[pick])])) {
+            pick = h;
+          }
+        }
+        if (pick < 0) break;
+        waiting.push_back(at[pick]);
+        at[pick] = links.link[static_cast<size_t>(at[pick])];
+      }
+      for (int h = 1; h < lists; ++h) heads[h].head[t] = -1;
+    }
+    head[t] = -1;
+    for (const int32_t d : waiting) {
       const auto ds = static_cast<size_t>(d);
-      const int32_t d_next = link[ds];
       const Eigen::Index d_rows = l.row_start[ds + 1] - l.row_start[ds], d_cols = l.first[ds + 1] - l.first[ds];
       const int32_t* drow = l.rows + l.row_start[ds];
-      const int64_t from = next_row[ds];
+      const int64_t from = links.next_row[ds];
       int64_t to = from;
       while (to < d_rows && drow[to] < k2) ++to;
       const Eigen::Index m1 = to - from, m2 = d_rows - from;  // rows in t's columns; rows from there down
@@ -66,15 +96,10 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const int64_
         const Eigen::Index col = drow[from + jj] - k1;
         for (Eigen::Index ii = jj; ii < m2; ++ii) lt(map[static_cast<size_t>(drow[from + ii])], col) -= c(ii, jj);
       }
-      next_row[ds] = to;
-      if (to < d_rows) {  // d's next rows are in a later supernode: wait there
-        const auto target = static_cast<size_t>(l.supernode_of[drow[to]]);
-        link[ds] = head[target];
-        head[target] = d;
-      }
-      d = d_next;
+      links.next_row[ds] = to;
+      // d's next rows are in a later supernode: wait there.
+      if (to < d_rows) wait_for(d, static_cast<size_t>(l.supernode_of[drow[to]]), static_cast<int64_t>(t));
     }
-    head[t] = -1;
     auto diagonal = lt.topRows(ncols);
     const Eigen::Index bad = Eigen::internal::llt_inplace<double, Eigen::Lower>::blocked(diagonal);
     // Eigen's LLT stops at a pivot that is not positive but passes NaN through; a non-finite
@@ -94,10 +119,8 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const int64_
     if (nrows > ncols) {
       auto below = lt.bottomRows(nrows - ncols);
       diagonal.triangularView<Eigen::Lower>().transpose().solveInPlace<Eigen::OnTheRight>(below);
-      next_row[t] = ncols;
-      const auto target = static_cast<size_t>(l.supernode_of[rows[ncols]]);
-      link[t] = head[target];
-      head[target] = static_cast<int32_t>(t);
+      links.next_row[t] = ncols;
+      wait_for(static_cast<int32_t>(t), static_cast<size_t>(l.supernode_of[rows[ncols]]), static_cast<int64_t>(t));
     }
   }
   outcome.min_diagonal = low;

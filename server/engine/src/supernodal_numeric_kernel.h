@@ -15,14 +15,45 @@ struct SupernodalOutcome {
   double min_diagonal = std::numeric_limits<double>::infinity();  ///< min L_kk, when it succeeded
 };
 
+/// A's entries in the factor's order as plain arrays (FactorOrderEntries) and its values.
+struct SupernodalInput {
+  const int64_t* start = nullptr;
+  const int32_t* row = nullptr;
+  const int32_t* value = nullptr;
+  const double* a_values = nullptr;
+};
+
+/// The bookkeeping of one left-looking factorization, shared by the threads that run parts of it
+/// (per supernode; each entry is touched by one thread at a time: the one that factors the
+/// supernode's part of the tree, then the one that factors the top).
+struct SupernodalLinks {
+  int32_t* link = nullptr;       // next in the list the supernode waits in
+  int64_t* next_row = nullptr;   // where its rows in the supernode it waits for begin
+  int64_t* pushed_at = nullptr;  // the supernode being factored when it was put into that list
+};
+
+/// One thread's scratch: its lists' heads (per supernode, -1 = empty; ns of them) and a column
+/// map (one entry per column).
+struct SupernodalScratch {
+  int32_t* head = nullptr;
+  int32_t* map = nullptr;
+};
+
 namespace supernodal_kernel {
 
-/// factor_supernodes (supernodal_numeric.h) with A's entries as plain arrays: the baseline build
-/// and, where the compiler could build it (SOFTSHELL_X86_64_V3_KERNELS), the x86-64-v3 one.
-SupernodalOutcome factor_baseline(const SupernodalLayout& layout, const int64_t* start, const int32_t* row,
-                                  const int32_t* value, const double* a_values, double* values);
-SupernodalOutcome factor_x86_64_v3(const SupernodalLayout& layout, const int64_t* start, const int32_t* row,
-                                   const int32_t* value, const double* a_values, double* values);
+/// Factors the supernodes order[0 .. count) (ascending), each after gathering the updates of its
+/// descendants from the lists heads[0 .. lists), lists <= 4 (merged by the time they were put there, the
+/// latest first: the order a factorization of the whole tree on one thread gathers them in, so
+/// the arithmetic is the same bit for bit); finished supernodes and relinked descendants go into
+/// heads[0]. Stops at the first supernode whose diagonal block is not positive definite; the
+/// outcome's min_diagonal is over the supernodes factored. Built twice: the baseline build and,
+/// where the compiler could build it (SOFTSHELL_X86_64_V3_KERNELS), the x86-64-v3 one.
+SupernodalOutcome factor_baseline(const SupernodalLayout& layout, const SupernodalInput& a, const int32_t* order,
+                                  int64_t count, const SupernodalScratch* heads, int lists, SupernodalLinks links,
+                                  double* values);
+SupernodalOutcome factor_x86_64_v3(const SupernodalLayout& layout, const SupernodalInput& a, const int32_t* order,
+                                   int64_t count, const SupernodalScratch* heads, int lists, SupernodalLinks links,
+                                   double* values);
 
 }  // namespace supernodal_kernel
 }  // namespace softshell::engine::internal

@@ -69,6 +69,10 @@ class TwoThreadSweeps {
   template <class X>
   void backward(const SupernodalLayout& l, X& x, Executor& executor) const;
 
+  /// The split: the supernodes of half 0 or 1 and of the top, ascending (the numeric
+  /// factorization on two threads uses it too, supernodal_numeric.h).
+  const std::vector<int32_t>& half(int h) const { return halves_[static_cast<size_t>(h)]; }
+  const std::vector<int32_t>& top() const { return top_; }
   /// The share of the factor's entries in the top (what one thread sweeps alone).
   double top_share() const { return top_share_; }
   /// Memory held by the plan.
