@@ -1,5 +1,5 @@
-// The triangular sweeps of a factored stiffness matrix on one thread and on two
-// (engine/src/supernodal_sweeps.h): a whole forward and backward sweep with one right-hand side,
+// The triangular sweeps and the numeric factorization of a stiffness matrix on one thread and on
+// two (engine/src/supernodal_sweeps.h, supernodal_numeric.h): a whole forward and backward sweep with one right-hand side,
 // what a preconditioned Krylov iteration of the nonlinear solver and a linear solve's backward
 // half cost. Each mesh is held by the lowest 5% of its control points (bench_drag.h).
 //
@@ -7,7 +7,8 @@
 // 8 MB or more, and catmark_righthanded below it)
 // Prints, per mesh: the factor, whether its tree split into two halves, and the median (90th
 // percentile) of the sweeps on one thread (the backend's own: CHOLMOD's BLAS or the GPL-free
-// one's) and on two.
+// one's) and on two, and of a refactorization into the same analysis on one thread and on two
+// (supernodal_numeric.h).
 
 #include <algorithm>
 #include <cstdio>
