@@ -1,7 +1,7 @@
 // The triangular sweeps and the numeric factorization of a stiffness matrix on one thread and on
-// two (engine/src/supernodal_sweeps.h, supernodal_numeric.h): a whole forward and backward sweep with one right-hand side,
-// what a preconditioned Krylov iteration of the nonlinear solver and a linear solve's backward
-// half cost. Each mesh is held by the lowest 5% of its control points (bench_drag.h).
+// two (engine/src/supernodal_sweeps.h, supernodal_numeric.h): a whole forward and backward sweep
+// with one right-hand side, what a preconditioned Krylov iteration of the nonlinear solver and a
+// linear solve's backward half cost. Each mesh is held by the lowest 5% of its control points (bench_drag.h).
 //
 // Usage: bench_sweeps [repeats = 100] [mesh ...]   (default: the shipped meshes with factors of
 // 8 MB or more, and catmark_righthanded below it)
