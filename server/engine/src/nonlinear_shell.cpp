@@ -74,6 +74,43 @@ void NonlinearShell::for_each_element(const Rule& rule, Fn&& fn) const {
   }, threads);
 }
 
+template <class Fn>
+void NonlinearShell::for_each_control_point_range(const Rule& rule, Fn&& fn) const {
+  constexpr int64_t kPointsPerChunk = 64;
+  const auto n = static_cast<int64_t>(rule.touch_start.size()) - 1;
+  const int threads = rule.points < 2048 ? 1 : workers(threads_);
+  if (threads == 1) {
+    fn(int32_t{0}, static_cast<int32_t>(n));
+    return;
+  }
+  executor_->parallel_for(0, (n + kPointsPerChunk - 1) / kPointsPerChunk, [&](int64_t c) {
+    fn(static_cast<int32_t>(c * kPointsPerChunk), static_cast<int32_t>(std::min(n, (c + 1) * kPointsPerChunk)));
+  }, threads);
+}
+
+template <class Fn>
+void NonlinearShell::for_each_control_point(const Rule& rule, Fn&& fn) const {
+  for_each_control_point_range(rule, [&](int32_t begin, int32_t end) {
+    for (int32_t p = begin; p < end; ++p) fn(p);
+  });
+}
+
+std::array<double, 3> NonlinearShell::gathered(const Rule& rule, const double* rows, Eigen::Index width, int32_t p,
+                                                Eigen::Index k) {
+  std::array<double, 3> sum{0.0, 0.0, 0.0};  // (three chains of additions at once)
+  const auto pi = static_cast<size_t>(p);
+  for (size_t t = rule.touch_start[pi]; t < rule.touch_start[pi + 1]; ++t) {
+    const auto e = static_cast<size_t>(rule.touches[t][0]);
+    const auto first = rule.element_rows[e];
+    const auto m = static_cast<Eigen::Index>(rule.element_rows[e + 1] - first);
+    const double* row = rows + static_cast<Eigen::Index>(first) * width + k * m + rule.touches[t][1];
+    sum[0] += row[0];
+    sum[1] += row[m];
+    sum[2] += row[2 * m];
+  }
+  return sum;
+}
+
 void NonlinearShell::build_rule(const std::vector<Cell>& cells, const std::vector<int>& gauss, int threads,
                                 Rule& rule) const {
   const ShellModel& m = *model_;
@@ -223,6 +260,22 @@ void NonlinearShell::build_rule(const std::vector<Cell>& cells, const std::vecto
       }
     }
   }, workers(threads));
+  const size_t ne = rule.elements.size();
+  rule.element_rows.assign(ne + 1, 0);
+  rule.touch_start.assign(static_cast<size_t>(m.num_dofs() / 3) + 1, 0);
+  for (size_t e = 0; e < ne; ++e) {
+    rule.element_rows[e + 1] = rule.element_rows[e] + rule.elements[e].indices.size();
+    for (int32_t p : rule.elements[e].indices) ++rule.touch_start[static_cast<size_t>(p) + 1];
+  }
+  for (size_t p = 1; p < rule.touch_start.size(); ++p) rule.touch_start[p] += rule.touch_start[p - 1];
+  rule.touches.resize(rule.touch_start.back());
+  std::vector<size_t> next(rule.touch_start.begin(), rule.touch_start.end() - 1);
+  for (size_t e = 0; e < ne; ++e) {
+    const std::vector<int32_t>& indices = rule.elements[e].indices;
+    for (size_t a = 0; a < indices.size(); ++a) {
+      rule.touches[next[static_cast<size_t>(indices[a])]++] = {static_cast<int32_t>(e), static_cast<int32_t>(a)};
+    }
+  }
 }
 
 std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<const ShellModel> model, int threads,
@@ -297,6 +350,21 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
     shell->coarse_error_ = m.stiffness();
     double* error = shell->coarse_error_.valuePtr();
     for (Eigen::Index i = 0; i < coarse_rest.nonZeros(); ++i) error[i] -= coarse_rest.valuePtr()[i];
+    // Symmetric bit for bit (it is, both matrices are built so; this makes sure), so that its
+    // product can be taken column by column on both threads with the bits of a one-thread product.
+    const Eigen::SparseMatrix<double> transposed = shell->coarse_error_.transpose();
+    const Eigen::SparseMatrix<double>& e = shell->coarse_error_;
+    if (!std::equal(transposed.outerIndexPtr(), transposed.outerIndexPtr() + e.cols() + 1, e.outerIndexPtr()) ||
+        !std::equal(transposed.innerIndexPtr(), transposed.innerIndexPtr() + e.nonZeros(), e.innerIndexPtr())) {
+      fail(ErrorCode::kInternal, "nonlinear shell: the stiffness pattern is not symmetric");
+    }
+    for (Eigen::Index c = 0; c + 2 < e.cols(); c += 3) {  // and made of 3 x 3 blocks (the product reads so)
+      const int* outer = e.outerIndexPtr();
+      if (outer[c + 1] - outer[c] != outer[c + 2] - outer[c + 1] || outer[c + 2] - outer[c + 1] != outer[c + 3] - outer[c + 2]) {
+        fail(ErrorCode::kInternal, "nonlinear shell: the stiffness pattern is not made of 3 x 3 blocks");
+      }
+    }
+    for (Eigen::Index i = 0; i < transposed.nonZeros(); ++i) error[i] = 0.5 * (error[i] + transposed.valuePtr()[i]);
   }
   shell->bytes_ = shell->count_bytes();
   return shell;
@@ -326,20 +394,21 @@ size_t NonlinearShell::memory_bytes() const {
   return bytes;
 }
 
-NonlinearShell::Workspace NonlinearShell::take_workspace(size_t size) const {
+NonlinearShell::Workspace NonlinearShell::take_workspace(size_t size, bool rows) const {
+  auto& pool = rows ? row_workspaces_ : workspaces_;
   std::unique_ptr<std::vector<double>> w;
   {
     std::lock_guard lock(workspace_mutex_);
-    if (!workspaces_.empty()) {
-      w = std::move(workspaces_.back());
-      workspaces_.pop_back();
+    if (!pool.empty()) {
+      w = std::move(pool.back());
+      pool.pop_back();
     }
   }
   if (!w) w = std::make_unique<std::vector<double>>();
   w->resize(size);
-  return Workspace(w.release(), [this](std::vector<double>* done) {
+  return Workspace(w.release(), [this, &pool](std::vector<double>* done) {
     std::lock_guard lock(workspace_mutex_);
-    workspaces_.emplace_back(done);
+    pool.emplace_back(done);
   });
 }
 
@@ -348,6 +417,8 @@ size_t NonlinearShell::count_bytes() const {
   bytes += static_cast<size_t>(coarse_error_.nonZeros()) * (sizeof(double) + sizeof(int));
   for (const Rule* rule : {&fine_, &coarse_, &early_}) {
     bytes += rule->reference.size() * sizeof(double);
+    bytes += (rule->element_rows.size() + rule->touch_start.size()) * sizeof(size_t) +
+             rule->touches.size() * sizeof(rule->touches[0]);
     for (const Element& e : rule->elements) {
       bytes += sizeof(Element) + (e.indices.size() + e.offsets.size()) * sizeof(int32_t);
       for (const Piece& piece : e.pieces) bytes += sizeof(Piece) + static_cast<size_t>(piece.w.size()) * sizeof(double);
@@ -378,44 +449,49 @@ bool NonlinearShell::evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, S
     state.points.clear();  // (keeps its capacity for the next evaluation with them)
   }
   const size_t ne = rule.elements.size();
-  std::vector<Eigen::MatrixX3d> element_force(ne), element_pressure(with_pressure ? ne : 0);
+  const size_t rows = rule.element_rows.back();
+  Workspace force_rows = take_workspace(3 * rows, true);
+  Workspace pressure_rows = with_pressure ? take_workspace(3 * rows, true) : nullptr;
   std::vector<double> element_energy(ne, 0.0), element_gradient(ne, 0.0);
   std::vector<char> element_ok(ne, 1);
   for_each_element(rule, [&](size_t ei) {
     const Element& e = rule.elements[ei];
     const auto p = e.points;
     const auto m = static_cast<Eigen::Index>(e.indices.size());
-    Eigen::MatrixX3d local(m, 3);
+    thread_local Eigen::MatrixX3d local;
+    local.resize(m, 3);
     for (Eigen::Index a = 0; a < m; ++a) local.row(a) = u.segment<3>(3 * e.indices[static_cast<size_t>(a)]).transpose();
     Scratch& scratch = thread_scratch(rule, e);
-    element_force[ei].setZero(m, 3);
-    if (with_pressure) element_pressure[ei].setZero(m, 3);
+    double* force = force_rows->data() + 3 * rule.element_rows[ei];
+    double* pressure = with_pressure ? pressure_rows->data() + 3 * rule.element_rows[ei] : nullptr;
+    std::fill(force, force + 3 * m, 0.0);
+    if (with_pressure) std::fill(pressure, pressure + 3 * m, 0.0);
     double energy = 0.0, gradient = 0.0;
     element_ok[ei] = element_forces(scratch.pieces.data(), scratch.pieces.size(), p, m,
                                     local.data(), rule.reference.data() + kRef * e.first_point, bending(),
                                     with_points ? state.points.data() + kState * e.first_point : nullptr,
-                                    with_pressure, scratch.values.data(),
-                                    scratch.coef.data(), element_force[ei].data(),
-                                    with_pressure ? element_pressure[ei].data() : nullptr, energy, gradient);
+                                    with_pressure, scratch.values.data(), scratch.coef.data(), force, pressure,
+                                    energy, gradient);
     element_energy[ei] = energy;
     element_gradient[ei] = gradient;
   });
   state.valid = std::all_of(element_ok.begin(), element_ok.end(), [](char ok) { return ok != 0; });
   state.energy = 0.0;
   state.max_gradient = ne ? *std::max_element(element_gradient.begin(), element_gradient.end()) : 0.0;
-  state.internal_force.setZero(ndof);
-  state.pressure_force.setZero(with_pressure ? ndof : 0);
-  if (!state.valid) return false;
-  for (size_t ei = 0; ei < ne; ++ei) {
-    const Element& e = rule.elements[ei];
-    state.energy += element_energy[ei];
-    for (size_t a = 0; a < e.indices.size(); ++a) {
-      state.internal_force.segment<3>(3 * e.indices[a]) += element_force[ei].row(static_cast<Eigen::Index>(a)).transpose();
-      if (with_pressure) {
-        state.pressure_force.segment<3>(3 * e.indices[a]) += element_pressure[ei].row(static_cast<Eigen::Index>(a)).transpose();
-      }
-    }
+  state.internal_force.resize(ndof);
+  state.pressure_force.resize(with_pressure ? ndof : 0);
+  if (!state.valid) {
+    state.internal_force.setZero();
+    state.pressure_force.setZero();
+    return false;
   }
+  for (size_t ei = 0; ei < ne; ++ei) state.energy += element_energy[ei];
+  for_each_control_point(rule, [&](int32_t c) {
+    state.internal_force.segment<3>(3 * c) = Eigen::Vector3d(gathered(rule, force_rows->data(), 3, c, 0).data());
+    if (with_pressure) {
+      state.pressure_force.segment<3>(3 * c) = Eigen::Vector3d(gathered(rule, pressure_rows->data(), 3, c, 0).data());
+    }
+  });
   state.valid = std::isfinite(state.energy) && state.internal_force.allFinite() &&
                 (!with_pressure || state.pressure_force.allFinite());
   return state.valid;
@@ -433,45 +509,99 @@ bool NonlinearShell::evaluate_coarse(const Eigen::VectorXd& u, ShellState& coars
 
 void NonlinearShell::approximate_tangent_product(const ShellState& coarse, double pressure, const Eigen::VectorXd& v,
                                                  Eigen::VectorXd& out) const {
-  Eigen::MatrixXd remainder;
-  tangent_product_rule(coarse_, coarse, pressure, v, remainder);
-  out = coarse_error_ * v;
-  out += remainder.col(0);
+  const Workspace remainder_rows = element_products(coarse_, coarse, pressure, v);
+  out.resize(num_dofs());
+  const int* outer = coarse_error_.outerIndexPtr();
+  const int* inner = coarse_error_.innerIndexPtr();
+  const double* error = coarse_error_.valuePtr();
+  const double* x = v.data();
+  // Rows 3c..3c+2 of (K - K_coarse(0)) v, `c` and `d` side by side (six independent chains of
+  // additions; each row's own order is that of a one-thread column-by-column product, as the
+  // matrix is symmetric bit for bit and its columns 3c..3c+2 share their rows).
+  auto rows_of = [&](int32_t c, int32_t d) {
+    const int k = 3 * c, l = 3 * d;
+    const int lk = outer[k + 1] - outer[k], ll = outer[l + 1] - outer[l];
+    const int* rk = inner + outer[k];
+    const int* rl = inner + outer[l];
+    const double *k0 = error + outer[k], *k1 = error + outer[k + 1], *k2 = error + outer[k + 2];
+    const double *l0 = error + outer[l], *l1 = error + outer[l + 1], *l2 = error + outer[l + 2];
+    double a0 = 0.0, a1 = 0.0, a2 = 0.0, b0 = 0.0, b1 = 0.0, b2 = 0.0;
+    const int both = std::min(lk, ll);
+    int at = 0;
+    for (; at < both; ++at) {
+      const double xk = x[rk[at]], xl = x[rl[at]];
+      a0 += k0[at] * xk;
+      b0 += l0[at] * xl;
+      a1 += k1[at] * xk;
+      b1 += l1[at] * xl;
+      a2 += k2[at] * xk;
+      b2 += l2[at] * xl;
+    }
+    for (int i = at; i < lk; ++i) {
+      const double xk = x[rk[i]];
+      a0 += k0[i] * xk;
+      a1 += k1[i] * xk;
+      a2 += k2[i] * xk;
+    }
+    for (int i = at; i < ll; ++i) {
+      const double xl = x[rl[i]];
+      b0 += l0[i] * xl;
+      b1 += l1[i] * xl;
+      b2 += l2[i] * xl;
+    }
+    const std::array<double, 3> rc = gathered(coarse_, remainder_rows->data(), 3, c, 0);
+    out[k] = a0 + rc[0];
+    out[k + 1] = a1 + rc[1];
+    out[k + 2] = a2 + rc[2];
+    if (d != c) {
+      const std::array<double, 3> rd = gathered(coarse_, remainder_rows->data(), 3, d, 0);
+      out[l] = b0 + rd[0];
+      out[l + 1] = b1 + rd[1];
+      out[l + 2] = b2 + rd[2];
+    }
+  };
+  for_each_control_point_range(coarse_, [&](int32_t begin, int32_t end) {
+    for (int32_t c = begin; c < end; c += 2) rows_of(c, std::min(c + 1, end - 1));
+  });
 }
 
-void NonlinearShell::tangent_product_rule(const Rule& rule, const ShellState& state, double pressure,
-                                          const Eigen::MatrixXd& v, Eigen::MatrixXd& out) const {
+NonlinearShell::Workspace NonlinearShell::element_products(const Rule& rule, const ShellState& state, double pressure,
+                                                           const Eigen::MatrixXd& v) const {
   const int32_t ndof = num_dofs();
   if (!state.valid || v.rows() != ndof || state.points.size() != kState * rule.points) {
     fail(ErrorCode::kInternal, "nonlinear shell: tangent product of a bad state");
   }
   const Eigen::Index cols = v.cols();
-  std::vector<Eigen::MatrixXd> element_out(rule.elements.size());
+  Workspace rows = take_workspace(static_cast<size_t>(3 * cols) * rule.element_rows.back(), true);
   for_each_element(rule, [&](size_t ei) {
     const Element& e = rule.elements[ei];
     const auto p = e.points;
     const auto m = static_cast<Eigen::Index>(e.indices.size());
-    Eigen::MatrixX3d local(m, 3);
+    thread_local Eigen::MatrixX3d local;
+    local.resize(m, 3);
     Scratch& scratch = thread_scratch(rule, e);
-    Eigen::MatrixXd& result = element_out[ei];
-    result.setZero(m, 3 * cols);
+    double* result = rows->data() + static_cast<Eigen::Index>(rule.element_rows[ei]) * 3 * cols;
+    std::fill(result, result + 3 * cols * m, 0.0);
     for (Eigen::Index col = 0; col < cols; ++col) {
       for (Eigen::Index a = 0; a < m; ++a) local.row(a) = v.block<3, 1>(3 * e.indices[static_cast<size_t>(a)], col).transpose();
       element_tangent(scratch.pieces.data(), scratch.pieces.size(), p, m, local.data(),
                       rule.reference.data() + kRef * e.first_point, bending(),
-                      state.points.data() + kState * e.first_point, pressure, scratch.values.data(), scratch.coef.data(), result.data() + 3 * col * m);
+                      state.points.data() + kState * e.first_point, pressure, scratch.values.data(), scratch.coef.data(), result + 3 * col * m);
     }
   });
-  out.setZero(ndof, cols);
-  for (size_t ei = 0; ei < rule.elements.size(); ++ei) {
-    const Element& e = rule.elements[ei];
-    const auto m = static_cast<Eigen::Index>(e.indices.size());
-    for (Eigen::Index a = 0; a < m; ++a) {
-      for (Eigen::Index c = 0; c < cols; ++c) {
-        for (int i = 0; i < 3; ++i) out(3 * e.indices[static_cast<size_t>(a)] + i, c) += element_out[ei](a, 3 * c + i);
-      }
+  return rows;
+}
+
+void NonlinearShell::tangent_product_rule(const Rule& rule, const ShellState& state, double pressure,
+                                          const Eigen::MatrixXd& v, Eigen::MatrixXd& out) const {
+  const Workspace rows = element_products(rule, state, pressure, v);
+  const Eigen::Index cols = v.cols();
+  out.resize(num_dofs(), cols);
+  for_each_control_point(rule, [&](int32_t c) {
+    for (Eigen::Index col = 0; col < cols; ++col) {
+      out.block<3, 1>(3 * c, col) = Eigen::Vector3d(gathered(rule, rows->data(), 3 * cols, c, 3 * col).data());
     }
-  }
+  });
 }
 
 void NonlinearShell::assemble_tangent(const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const {
@@ -530,20 +660,25 @@ void NonlinearShell::assemble_rule(const Rule& rule, const ShellState& state, do
                            bending(), state.points.data() + kState * e.first_point, pressure, ke);
     std::copy(ke.data(), ke.data() + ke.size(), element_k + at[ei]);
   });
-  for (size_t ei = 0; ei < rule.elements.size(); ++ei) {
-    const Element& e = rule.elements[ei];
-    const auto m = static_cast<Eigen::Index>(e.indices.size());
-    const Eigen::Map<const Eigen::MatrixXd> ke(element_k + at[ei], 3 * m, 3 * m);
-    for (Eigen::Index bl = 0; bl < m; ++bl) {
+  // Column block 3b..3b+2 of K from the elements touching control point b, in element order:
+  // each entry's sum in the order of a one-thread element-by-element assembly.
+  for_each_control_point(rule, [&](int32_t b) {
+    const auto bi = static_cast<size_t>(b);
+    for (size_t t = rule.touch_start[bi]; t < rule.touch_start[bi + 1]; ++t) {
+      const auto ei = static_cast<size_t>(rule.touches[t][0]);
+      const Eigen::Index bl = rule.touches[t][1];
+      const Element& e = rule.elements[ei];
+      const auto m = static_cast<Eigen::Index>(e.indices.size());
+      const Eigen::Map<const Eigen::MatrixXd> ke(element_k + at[ei], 3 * m, 3 * m);
       for (int j = 0; j < 3; ++j) {
-        double* column = out.valuePtr() + out.outerIndexPtr()[3 * e.indices[static_cast<size_t>(bl)] + j];
+        double* column = out.valuePtr() + out.outerIndexPtr()[3 * b + j];
         for (Eigen::Index al = 0; al < m; ++al) {
           double* block = column + e.offsets[static_cast<size_t>(al + m * bl)];
           for (int i = 0; i < 3; ++i) block[i] += ke(3 * al + i, 3 * bl + j);
         }
       }
     }
-  }
+  });
 }
 
 }  // namespace softshell::engine::internal

@@ -144,6 +144,13 @@ class NonlinearShell {
     // By Gauss points per direction g of the cells' rules (those it has):
     std::array<Eigen::MatrixXd, 11> bernstein;    // 6 g^2 x 16: the unit cell's bicubic basis at its points
     std::array<Eigen::MatrixXd, 11> bernstein_t;  // its transpose (the 16 values at a point contiguous)
+    // Per-element results (forces, products) are written side by side, element e's m x width
+    // block (column-major) from row `element_rows[e]` on, and summed per control point from the
+    // elements that touch it in element order (`touches`, from `touch_start[p]` on): the order
+    // one thread adds them in, so the sums are split among threads and keep their bits.
+    std::vector<size_t> element_rows;                  // ne + 1
+    std::vector<size_t> touch_start;                   // n + 1
+    std::vector<std::array<int32_t, 2>> touches;       // (element, the point's index in it)
   };
   struct Cell {  // (face, sub-face) and its points
     int32_t face = 0, subface = 0;
@@ -151,16 +158,29 @@ class NonlinearShell {
     std::vector<double> weights;
   };
   NonlinearShell() = default;
+  using Workspace = std::unique_ptr<std::vector<double>, std::function<void(std::vector<double>*)>>;
 
   // `gauss`: the Gauss points per direction of the cells' rules (the face's first).
   void build_rule(const std::vector<Cell>& cells, const std::vector<int>& gauss, int threads, Rule& rule) const;
   static Eigen::MatrixXd element_basis(const Rule& rule, const Element& e);  // 6P x m
   template <class Fn>
   void for_each_element(const Rule& rule, Fn&& fn) const;
+  // fn(p) for every control point p, on the threads for_each_element would use.
+  template <class Fn>
+  void for_each_control_point(const Rule& rule, Fn&& fn) const;
+  // fn(begin, end) for ranges of control points that cover them all.
+  template <class Fn>
+  void for_each_control_point_range(const Rule& rule, Fn&& fn) const;
+  // Sums over the elements touching control point p of their columns k, k + 1, k + 2 at p,
+  // per-element blocks of `width` columns in `rows` (Rule::element_rows).
+  static std::array<double, 3> gathered(const Rule& rule, const double* rows, Eigen::Index width, int32_t p, Eigen::Index k);
   bool evaluate_rule(const Rule& rule, const Eigen::VectorXd& u, ShellState& state, bool with_pressure,
                      bool with_points = true) const;
   void tangent_product_rule(const Rule& rule, const ShellState& state, double pressure, const Eigen::MatrixXd& v,
                             Eigen::MatrixXd& out) const;
+  // The elements' products with the columns of v, side by side (Rule::element_rows, width 3 v.cols()).
+  Workspace element_products(const Rule& rule, const ShellState& state, double pressure,
+                             const Eigen::MatrixXd& v) const;
   void assemble_rule(const Rule& rule, const ShellState& state, double pressure, Eigen::SparseMatrix<double>& out) const;
 
   std::shared_ptr<const ShellModel> model_;
@@ -180,11 +200,11 @@ class NonlinearShell {
   std::shared_ptr<Executor> executor_;
   int threads_ = 0;
 
-  // Workspaces of assemblies, returned to the pool when done (one per concurrent assembly).
-  using Workspace = std::unique_ptr<std::vector<double>, std::function<void(std::vector<double>*)>>;
-  Workspace take_workspace(size_t size) const;
+  // Workspaces of passes, returned to their pool when done (one per concurrent pass).
+  // `rows`: a workspace for per-element rows (a few MB), kept apart from the element matrices'.
+  Workspace take_workspace(size_t size, bool rows = false) const;
   mutable std::mutex workspace_mutex_;
-  mutable std::vector<std::unique_ptr<std::vector<double>>> workspaces_;
+  mutable std::vector<std::unique_ptr<std::vector<double>>> workspaces_, row_workspaces_;
 };
 
 }  // namespace softshell::engine::internal
