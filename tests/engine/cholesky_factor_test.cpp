@@ -57,6 +57,31 @@ Sparse grid_laplacian(int nx, int ny, double shift) {
   return a;
 }
 
+// A grid whose nodes couple with every node within `radius` steps in each direction (as control
+// points of a subdivision surface do): wider separators, so larger dense blocks in the factor.
+Sparse wide_grid(int nx, int ny, int radius) {
+  std::vector<Eigen::Triplet<double>> t;
+  auto id = [&](int i, int j) { return j * nx + i; };
+  for (int j = 0; j < ny; ++j) {
+    for (int i = 0; i < nx; ++i) {
+      double degree = 0.0;
+      for (int dj = -radius; dj <= radius; ++dj) {
+        for (int di = -radius; di <= radius; ++di) {
+          const int i2 = i + di, j2 = j + dj;
+          if ((di == 0 && dj == 0) || i2 < 0 || i2 >= nx || j2 < 0 || j2 >= ny) continue;
+          const double w = 1.0 / (std::abs(di) + std::abs(dj));
+          t.emplace_back(id(i, j), id(i2, j2), -w);
+          degree += w;
+        }
+      }
+      t.emplace_back(id(i, j), id(i, j), degree + 0.05);
+    }
+  }
+  Sparse a(nx * ny, nx * ny);
+  a.setFromTriplets(t.begin(), t.end());
+  return a;
+}
+
 // kron(graph, block): three coupled DOFs per node, as in the shell's stiffness; every node's
 // three columns share one structure, so the factor has supernodes of at least three columns.
 Sparse with_blocks(const Sparse& graph, const Eigen::Matrix3d& block) {
@@ -306,6 +331,8 @@ TEST(CholeskyFactor, SweepsOnTwoThreadsSolveAsOnOne) {
 // in a half or in the top.
 TEST(CholeskyFactor, FactorsOnTwoThreadsBitForBitAsOnOne) {
   const ScopedKnob<int64_t> plan_any_size(g_two_thread_sweep_entries, 0);
+  // Every update product of the top big enough to split goes to two threads (bands of rows).
+  const ScopedKnob<double> share_any_size(g_shared_product_flops, 0.0);
   const Eigen::Matrix3d block = node_block();
   const int nx = 40, ny = 36;
   const Sparse a = with_blocks(grid_laplacian(nx, ny, 0.05), block);
@@ -336,6 +363,20 @@ TEST(CholeskyFactor, FactorsOnTwoThreadsBitForBitAsOnOne) {
     const auto alone = factor(a, nullptr, true, failure);
     ASSERT_TRUE(alone);
     EXPECT_TRUE(alone->forward(b) == one->forward(b));
+  }
+  {
+    // Wider separators: top products to share (11 with CHOLMOD's ordering), of rows not multiples
+    // of the register tile. The comparison fails if a shared product sums in another order
+    // (checked by splitting one along its depth).
+    const Sparse wide = with_blocks(wide_grid(60, 56, 2), block);
+    const int64_t before = g_shared_products.load();
+    const auto wide_one = factor(wide, nullptr, false, failure);
+    const auto wide_two = factor(wide, nullptr, true, failure);
+    ASSERT_TRUE(wide_one && wide_two);
+    EXPECT_GT(g_shared_products.load() - before, 0) << "the top has products to share";
+    const Eigen::MatrixXd bw = random_rhs(wide.rows(), 2, 22);
+    EXPECT_TRUE(wide_one->forward(bw) == wide_two->forward(bw));
+    EXPECT_LT(relative_error(wide_two->backward(wide_two->forward(bw)), Eigen::SimplicialLLT<Sparse>(wide).solve(bw)), 1e-10);
   }
   // Failing pivots along the middle column of nodes and off it: in this build's ordering the
   // first fails in the top of the split, the others in the halves (checked with a trace).

@@ -9,7 +9,7 @@ namespace softshell::engine::internal {
 namespace {
 
 using Kernel = SupernodalOutcome (*)(const SupernodalLayout&, const SupernodalInput&, const int32_t*, int64_t,
-                                     const SupernodalScratch*, int, SupernodalLinks, double*);
+                                     const SupernodalScratch*, int, SupernodalLinks, double*, const SupernodalShare*);
 
 // Picked once, when the library loads.
 Kernel choose_kernel() {
@@ -31,6 +31,9 @@ Kernel kernel() {
 
 std::atomic<bool> g_supernodal_baseline_kernels{false};
 std::atomic<bool> g_two_thread_factorization{true};
+// About 0.1 ms of work on one thread: below it, waking the second costs more than it saves.
+std::atomic<double> g_shared_product_flops{2e6};
+std::atomic<int64_t> g_shared_products{0};
 
 FactorOrderEntries factor_order_entries(const Eigen::SparseMatrix<double>& upper, const std::vector<int32_t>& position) {
   const auto n = static_cast<size_t>(upper.rows());
@@ -73,7 +76,7 @@ SupernodalOutcome factor_supernodes(const SupernodalLayout& layout, const Factor
     std::vector<int32_t> order(ns), head(ns, -1), map(columns, 0);
     for (size_t t = 0; t < ns; ++t) order[t] = static_cast<int32_t>(t);
     const SupernodalScratch scratch{head.data(), map.data()};
-    return factor(layout, a, order.data(), static_cast<int64_t>(ns), &scratch, 1, links, values);
+    return factor(layout, a, order.data(), static_cast<int64_t>(ns), &scratch, 1, links, values, nullptr);
   }
   // Both halves of the tree at once (their supernodes' descendants are their own), then the top,
   // which gathers from its own list and both halves' (supernodal_sweeps.h: the same split).
@@ -88,7 +91,7 @@ SupernodalOutcome factor_supernodes(const SupernodalLayout& layout, const Factor
   executor->parallel_for(0, 2, [&](int64_t h) {
     const std::vector<int32_t>& order = split->half(static_cast<int>(h));
     halves[static_cast<size_t>(h)] = factor(layout, a, order.data(), static_cast<int64_t>(order.size()),
-                                            &scratch[static_cast<size_t>(h)], 1, links, values);
+                                            &scratch[static_cast<size_t>(h)], 1, links, values, nullptr);
   }, 2);
   // A failed half stops the factorization at its failing supernode; the top's supernodes before
   // it are factored still, so that the failure reported is the first in the order of the columns,
@@ -105,7 +108,15 @@ SupernodalOutcome factor_supernodes(const SupernodalLayout& layout, const Factor
   int64_t count = 0;
   while (count < static_cast<int64_t>(top.size()) && layout.first[top[static_cast<size_t>(count)]] < stop) ++count;
   const std::array<SupernodalScratch, 3> lists{scratch[2], scratch[0], scratch[1]};
-  SupernodalOutcome outcome = factor(layout, a, top.data(), count, lists.data(), 3, links, values);
+  // The top, on this thread with the executor's help for its large products.
+  SupernodalShare share;
+  share.context = executor;
+  share.run = [](void* context, void (*task)(void*, int), void* argument) {
+    g_shared_products.fetch_add(1, std::memory_order_relaxed);
+    static_cast<Executor*>(context)->parallel_for(0, 2, [&](int64_t part) { task(argument, static_cast<int>(part)); }, 2);
+  };
+  share.min_flops = g_shared_product_flops.load(std::memory_order_relaxed);
+  SupernodalOutcome outcome = factor(layout, a, top.data(), count, lists.data(), 3, links, values, &share);
   if (outcome.failed_column < 0 && failed) outcome = *failed;
   if (outcome.failed_column < 0) outcome.min_diagonal = std::min({outcome.min_diagonal, halves[0].min_diagonal, halves[1].min_diagonal});
   return outcome;

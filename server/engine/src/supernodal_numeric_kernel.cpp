@@ -32,7 +32,7 @@ using ConstBlock = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
 // its diagonal block and solves for the rows below it.
 SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const SupernodalInput& a, const int32_t* order,
                                          int64_t count, const SupernodalScratch* heads, int lists,
-                                         SupernodalLinks links, double* values) {
+                                         SupernodalLinks links, double* values, const SupernodalShare* share) {
   SupernodalOutcome outcome;
   int32_t* const head = heads[0].head;
   int32_t* const map = heads[0].map;
@@ -91,7 +91,21 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
       const ConstBlock ld(values + l.value_start[ds] + from, m2, d_cols, Eigen::OuterStride<>(d_rows));
       if (update.size() < static_cast<size_t>(m2 * m1)) update.resize(static_cast<size_t>(m2 * m1));
       Eigen::Map<Eigen::MatrixXd> c(update.data(), m2, m1);
-      c.noalias() = ld * ld.topRows(m1).transpose();
+      if (share && m1 >= 8 && m2 >= 96 && 2.0 * static_cast<double>(m2 * m1 * d_cols) >= share->min_flops) {
+        // Two threads, each a band of c's rows. The band starts at a multiple of 24 rows, so Eigen's
+        // product gives every row the same micro-kernel (and the same sum order) as the whole
+        // product would: its row blocks are multiples of its register tile (6 rows in the
+        // baseline build, 12 with AVX2), and its depth blocking depends on d_cols alone.
+        const Eigen::Index split = (m2 / 48) * 24;
+        auto band = [&](int part) {
+          const Eigen::Index r0 = part == 0 ? 0 : split, rows_in_band = part == 0 ? split : m2 - split;
+          c.middleRows(r0, rows_in_band).noalias() = ld.middleRows(r0, rows_in_band) * ld.topRows(m1).transpose();
+        };
+        share->run(share->context, [](void* argument, int part) { (*static_cast<decltype(band)*>(argument))(part); },
+                   &band);
+      } else {
+        c.noalias() = ld * ld.topRows(m1).transpose();
+      }
       for (Eigen::Index jj = 0; jj < m1; ++jj) {
         const Eigen::Index col = drow[from + jj] - k1;
         for (Eigen::Index ii = jj; ii < m2; ++ii) lt(map[static_cast<size_t>(drow[from + ii])], col) -= c(ii, jj);
