@@ -45,6 +45,12 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
     links.pushed_at[static_cast<size_t>(d)] = t;
     head[target] = d;
   };
+  // fn(0, split) and fn(split, end) on share's two threads.
+  auto share_rows = [share](Eigen::Index split, Eigen::Index end, const auto& fn) {
+    auto band = [&](int part) { part == 0 ? fn(0, split) : fn(split, end); };
+    share->run(share->context, [](void* argument, int part) { (*static_cast<decltype(band)*>(argument))(part); },
+               &band);
+  };
   for (int64_t i_t = 0; i_t < count; ++i_t) {
     const auto t = static_cast<size_t>(order[i_t]);
     const int32_t k1 = l.first[t], k2 = l.first[t + 1];
@@ -91,24 +97,24 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
       const ConstBlock ld(values + l.value_start[ds] + from, m2, d_cols, Eigen::OuterStride<>(d_rows));
       if (update.size() < static_cast<size_t>(m2 * m1)) update.resize(static_cast<size_t>(m2 * m1));
       Eigen::Map<Eigen::MatrixXd> c(update.data(), m2, m1);
+      // The product and its scatter into t's columns, by bands of rows (each band's rows land in
+      // rows of lt of their own).
+      auto update_rows = [&](Eigen::Index r0, Eigen::Index r1) {
+        c.middleRows(r0, r1 - r0).noalias() = ld.middleRows(r0, r1 - r0) * ld.topRows(m1).transpose();
+        for (Eigen::Index jj = 0; jj < m1; ++jj) {
+          const Eigen::Index col = drow[from + jj] - k1;
+          for (Eigen::Index ii = std::max(jj, r0); ii < r1; ++ii) lt(map[static_cast<size_t>(drow[from + ii])], col) -= c(ii, jj);
+        }
+      };
       if (share && m1 >= 8 && m2 >= 96 && 2.0 * static_cast<double>(m2 * m1 * d_cols) >= share->min_flops) {
-        // Two threads, each a band of c's rows. The band starts at a multiple of 24 rows, so Eigen's
-        // product gives every row the same micro-kernel (and the same sum order) as the whole
-        // product would: its row blocks are multiples of its register tile (6 rows in the
-        // baseline build, 12 with AVX2), and its depth blocking depends on d_cols alone.
+        // Two threads, a band each. The second starts at a multiple of 24 rows, so Eigen gives
+        // every row the same micro-kernel (and the same sum order) as in the whole product: its
+        // row blocks are multiples of its register tile (6 rows in the baseline build, 12 with
+        // AVX2), and its depth blocking depends on d_cols alone.
         const Eigen::Index split = (m2 / 48) * 24;
-        auto band = [&](int part) {
-          const Eigen::Index r0 = part == 0 ? 0 : split, rows_in_band = part == 0 ? split : m2 - split;
-          c.middleRows(r0, rows_in_band).noalias() = ld.middleRows(r0, rows_in_band) * ld.topRows(m1).transpose();
-        };
-        share->run(share->context, [](void* argument, int part) { (*static_cast<decltype(band)*>(argument))(part); },
-                   &band);
+        share_rows(split, m2, update_rows);
       } else {
-        c.noalias() = ld * ld.topRows(m1).transpose();
-      }
-      for (Eigen::Index jj = 0; jj < m1; ++jj) {
-        const Eigen::Index col = drow[from + jj] - k1;
-        for (Eigen::Index ii = jj; ii < m2; ++ii) lt(map[static_cast<size_t>(drow[from + ii])], col) -= c(ii, jj);
+        update_rows(0, m2);
       }
       links.next_row[ds] = to;
       // d's next rows are in a later supernode: wait there.
@@ -131,8 +137,17 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
     }
     low = std::min(low, diagonal.diagonal().minCoeff());
     if (nrows > ncols) {
-      auto below = lt.bottomRows(nrows - ncols);
-      diagonal.triangularView<Eigen::Lower>().transpose().solveInPlace<Eigen::OnTheRight>(below);
+      const Eigen::Index n_below = nrows - ncols;
+      // Each row of the rows below is solved on its own (bands of 24 rows: as for the products).
+      auto solve_rows = [&](Eigen::Index r0, Eigen::Index r1) {
+        auto band = lt.middleRows(ncols + r0, r1 - r0);
+        diagonal.triangularView<Eigen::Lower>().transpose().solveInPlace<Eigen::OnTheRight>(band);
+      };
+      if (share && n_below >= 96 && static_cast<double>(n_below * ncols * ncols) >= share->min_flops) {
+        share_rows((n_below / 48) * 24, n_below, solve_rows);
+      } else {
+        solve_rows(0, n_below);
+      }
       links.next_row[t] = ncols;
       wait_for(static_cast<int32_t>(t), static_cast<size_t>(l.supernode_of[rows[ncols]]), static_cast<int64_t>(t));
     }
