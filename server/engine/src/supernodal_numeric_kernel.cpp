@@ -100,7 +100,11 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
       // The product and its scatter into t's columns, by bands of rows (each band's rows land in
       // rows of lt of their own).
       auto update_rows = [&](Eigen::Index r0, Eigen::Index r1) {
-        c.middleRows(r0, r1 - r0).noalias() = ld.middleRows(r0, r1 - r0) * ld.topRows(m1).transpose();
+        if (r1 - r0 == m2) {  // (into c itself: a small product's coefficient-wise path depends on it)
+          c.noalias() = ld * ld.topRows(m1).transpose();
+        } else {
+          c.middleRows(r0, r1 - r0).noalias() = ld.middleRows(r0, r1 - r0) * ld.topRows(m1).transpose();
+        }
         for (Eigen::Index jj = 0; jj < m1; ++jj) {
           const Eigen::Index col = drow[from + jj] - k1;
           for (Eigen::Index ii = std::max(jj, r0); ii < r1; ++ii) lt(map[static_cast<size_t>(drow[from + ii])], col) -= c(ii, jj);
