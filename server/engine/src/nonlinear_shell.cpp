@@ -350,18 +350,25 @@ std::shared_ptr<const NonlinearShell> NonlinearShell::build(std::shared_ptr<cons
     shell->coarse_error_ = m.stiffness();
     double* error = shell->coarse_error_.valuePtr();
     for (Eigen::Index i = 0; i < coarse_rest.nonZeros(); ++i) error[i] -= coarse_rest.valuePtr()[i];
-    // Symmetric bit for bit (it is, both matrices are built so; this makes sure), so that its
-    // product can be taken column by column on both threads with the bits of a one-thread product.
+    // Symmetric bit for bit (it is, both matrices are built so; this makes sure): its rows are its
+    // columns, so approximate_tangent_product takes it by rows on both threads with the bits of a
+    // one-thread product by columns.
     const Eigen::SparseMatrix<double> transposed = shell->coarse_error_.transpose();
     const Eigen::SparseMatrix<double>& e = shell->coarse_error_;
     if (!std::equal(transposed.outerIndexPtr(), transposed.outerIndexPtr() + e.cols() + 1, e.outerIndexPtr()) ||
         !std::equal(transposed.innerIndexPtr(), transposed.innerIndexPtr() + e.nonZeros(), e.innerIndexPtr())) {
       fail(ErrorCode::kInternal, "nonlinear shell: the stiffness pattern is not symmetric");
     }
-    for (Eigen::Index c = 0; c + 2 < e.cols(); c += 3) {  // and made of 3 x 3 blocks (the product reads so)
-      const int* outer = e.outerIndexPtr();
-      if (outer[c + 1] - outer[c] != outer[c + 2] - outer[c + 1] || outer[c + 2] - outer[c + 1] != outer[c + 3] - outer[c + 2]) {
-        fail(ErrorCode::kInternal, "nonlinear shell: the stiffness pattern is not made of 3 x 3 blocks");
+    // And made of 3 x 3 blocks: the product reads columns 3c + 1 and 3c + 2 at column 3c's rows.
+    const int* outer = e.outerIndexPtr();
+    const int* inner = e.innerIndexPtr();
+    for (Eigen::Index c = 0; c + 2 < e.cols(); c += 3) {
+      const int length = outer[c + 1] - outer[c];
+      for (int i = 1; i <= 2; ++i) {
+        if (outer[c + i + 1] - outer[c + i] != length ||
+            !std::equal(inner + outer[c], inner + outer[c + 1], inner + outer[c + i])) {
+          fail(ErrorCode::kInternal, "nonlinear shell: the stiffness pattern is not made of 3 x 3 blocks");
+        }
       }
     }
     for (Eigen::Index i = 0; i < transposed.nonZeros(); ++i) error[i] = 0.5 * (error[i] + transposed.valuePtr()[i]);

@@ -108,7 +108,7 @@ SupernodalOutcome factor_supernodes(const SupernodalLayout& layout, const Factor
   int64_t count = 0;
   while (count < static_cast<int64_t>(top.size()) && layout.first[top[static_cast<size_t>(count)]] < stop) ++count;
   const std::array<SupernodalScratch, 3> lists{scratch[2], scratch[0], scratch[1]};
-  // The top, on this thread with the executor's help for its large products.
+  // The top, on this thread with the executor's help for its large products and solves.
   SupernodalShare share;
   share.context = executor;
   share.run = [](void* context, void (*task)(void*, int), void* argument) {

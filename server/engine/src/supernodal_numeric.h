@@ -55,7 +55,8 @@ FactorOrderEntries factor_order_entries(const Eigen::SparseMatrix<double>& upper
 /// std::bad_alloc if its workspace cannot be had.
 /// With `split` and an executor of two threads or more, the two halves of the elimination tree
 /// are factored at once and then the top (on_two_threads, as the sweeps), the top's large update
-/// products on two threads too: the same values bit for bit, and the same outcome, as on one thread.
+/// products and triangular solves on two threads too: the same values bit for bit, and the same
+/// outcome, as on one thread.
 SupernodalOutcome factor_supernodes(const SupernodalLayout& layout, const FactorOrderEntries& entries,
                                     const double* a_values, double* values, const TwoThreadSweeps* split = nullptr,
                                     Executor* executor = nullptr);
@@ -67,8 +68,8 @@ const char* supernodal_kernels();
 extern std::atomic<bool> g_supernodal_baseline_kernels;
 /// Tests and benchmarks: false factors on one thread even where a split and an executor are given.
 extern std::atomic<bool> g_two_thread_factorization;
-/// Tests and benchmarks: the top's update products of this many flops or more are computed by two
-/// threads (infinity: none); and how many have been so far.
+/// Tests and benchmarks: the top's update products and triangular solves of this many flops or
+/// more are computed by two threads (infinity: none); and how many have been so far.
 extern std::atomic<double> g_shared_product_flops;
 extern std::atomic<int64_t> g_shared_products;
 

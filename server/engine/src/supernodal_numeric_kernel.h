@@ -39,13 +39,14 @@ struct SupernodalScratch {
   int32_t* map = nullptr;
 };
 
-/// A second thread for the large dense products of the supernodes factored after the tree's two
-/// halves (plain types: the kernel is built twice). run(context, task, argument) calls
+/// A second thread for the large dense work of the supernodes factored after the tree's two
+/// halves: update products (with their scatter) and triangular solves, split into two bands of
+/// rows (plain types: the kernel is built twice). run(context, task, argument) calls
 /// task(argument, 0) and task(argument, 1) at once and returns when both are done.
 struct SupernodalShare {
   void (*run)(void* context, void (*task)(void* argument, int part), void* argument) = nullptr;
   void* context = nullptr;
-  double min_flops = 2e6;  // products below this many flops stay on one thread
+  double min_flops = 2e6;  // work below this many flops stays on one thread
 };
 
 namespace supernodal_kernel {
@@ -57,7 +58,8 @@ namespace supernodal_kernel {
 /// heads[0]. Stops at the first supernode whose diagonal block is not positive definite; the
 /// outcome's min_diagonal is over the supernodes factored. Built twice: the baseline build and,
 /// where the compiler could build it (SOFTSHELL_X86_64_V3_KERNELS), the x86-64-v3 one. `share`
-/// (may be null): the large update products are computed by two threads, with the same bits.
+/// (may be null): the large update products and triangular solves are computed by two threads,
+/// with the same bits.
 SupernodalOutcome factor_baseline(const SupernodalLayout& layout, const SupernodalInput& a, const int32_t* order,
                                   int64_t count, const SupernodalScratch* heads, int lists, SupernodalLinks links,
                                   double* values, const SupernodalShare* share);
