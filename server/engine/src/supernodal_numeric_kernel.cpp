@@ -27,6 +27,64 @@ namespace softshell::engine::internal::supernodal_kernel {
 using Block = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
 using ConstBlock = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
 
+// fn(0, split) and fn(split, end) on share's two threads.
+template <class Fn>
+void share_rows(const SupernodalShare& share, Eigen::Index split, Eigen::Index end, const Fn& fn) {
+  auto band = [&](int part) { part == 0 ? fn(0, split) : fn(split, end); };
+  share.run(share.context, [](void* argument, int part) { (*static_cast<decltype(band)*>(argument))(part); }, &band);
+}
+
+// Eigen's blocked LLT (Eigen/src/Cholesky/LLT.h, llt_inplace<Scalar, Lower>::blocked) step by step,
+// with its triangular solves and rank updates split into two bands of rows where `share` and the
+// work allow. A band starts at a multiple of 24 rows, and the rank update's second band is a
+// product left of its diagonal block and a rank update on it: every entry is summed by the same
+// micro-kernel in the same order as in the whole update (Eigen's row blocks there are multiples
+// of its register tile but the last; its depth, the block size, is never blocked), so the factor
+// is the same bit for bit. Returns the first column whose pivot is not positive, or -1.
+template <class MatrixType>
+Eigen::Index blocked_llt(MatrixType& m, const SupernodalShare* share) {
+  using Eigen::Dynamic;
+  using Eigen::Index;
+  using Eigen::internal::llt_inplace;
+  const Index size = m.rows();
+  if (!share || size < 192) return llt_inplace<double, Eigen::Lower>::blocked(m);
+  Index blockSize = size / 8;  // as Eigen's
+  blockSize = (blockSize / 16) * 16;
+  blockSize = std::min(std::max(blockSize, Index(8)), Index(128));
+  for (Index k = 0; k < size; k += blockSize) {
+    const Index bs = std::min(blockSize, size - k);
+    const Index rs = size - k - bs;
+    Eigen::Block<MatrixType, Dynamic, Dynamic> A11(m, k, k, bs, bs);
+    Eigen::Block<MatrixType, Dynamic, Dynamic> A21(m, k + bs, k, rs, bs);
+    Eigen::Block<MatrixType, Dynamic, Dynamic> A22(m, k + bs, k + bs, rs, rs);
+    const Index ret = llt_inplace<double, Eigen::Lower>::unblocked(A11);
+    if (ret >= 0) return k + ret;
+    if (rs <= 0) continue;
+    const bool shared = rs >= 96 && static_cast<double>(rs) * static_cast<double>(rs * bs) >= share->min_flops;
+    if (!shared) {
+      A11.adjoint().template triangularView<Eigen::Upper>().template solveInPlace<Eigen::OnTheRight>(A21);
+      A22.template selfadjointView<Eigen::Lower>().rankUpdate(A21, -1.0);
+      continue;
+    }
+    share_rows(*share, (rs / 48) * 24, rs, [&](Index r0, Index r1) {
+      auto band = A21.middleRows(r0, r1 - r0);
+      A11.adjoint().template triangularView<Eigen::Upper>().template solveInPlace<Eigen::OnTheRight>(band);
+    });
+    // The lower triangle's entries split about evenly: rows [0, s) hold s^2 / 2 of its rs^2 / 2.
+    const Index s = std::max<Index>(24, static_cast<Index>(static_cast<double>(rs) * 0.7071 / 24.0) * 24);
+    share_rows(*share, s, rs, [&](Index r0, Index r1) {
+      if (r0 == 0) {
+        A22.topLeftCorner(r1, r1).template selfadjointView<Eigen::Lower>().rankUpdate(A21.topRows(r1), -1.0);
+      } else {
+        A22.block(r0, 0, r1 - r0, r0).noalias() -= A21.middleRows(r0, r1 - r0) * A21.topRows(r0).transpose();
+        A22.block(r0, r0, r1 - r0, r1 - r0).template selfadjointView<Eigen::Lower>().rankUpdate(
+            A21.middleRows(r0, r1 - r0), -1.0);
+      }
+    });
+  }
+  return -1;
+}
+
 // Left-looking: supernode t gathers the updates of every descendant d with rows in t's columns
 // (d waits in one of t's lists until then; `next_row` is where d's rows in t begin), then factors
 // its diagonal block and solves for the rows below it.
@@ -44,12 +102,6 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
     links.link[static_cast<size_t>(d)] = head[target];
     links.pushed_at[static_cast<size_t>(d)] = t;
     head[target] = d;
-  };
-  // fn(0, split) and fn(split, end) on share's two threads.
-  auto share_rows = [share](Eigen::Index split, Eigen::Index end, const auto& fn) {
-    auto band = [&](int part) { part == 0 ? fn(0, split) : fn(split, end); };
-    share->run(share->context, [](void* argument, int part) { (*static_cast<decltype(band)*>(argument))(part); },
-               &band);
   };
   for (int64_t i_t = 0; i_t < count; ++i_t) {
     const auto t = static_cast<size_t>(order[i_t]);
@@ -116,7 +168,7 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
         // row blocks are multiples of its register tile (6 rows in the baseline build, 12 with
         // AVX2), and its depth blocking depends on d_cols alone.
         const Eigen::Index split = (m2 / 48) * 24;
-        share_rows(split, m2, update_rows);
+        share_rows(*share, split, m2, update_rows);
       } else {
         update_rows(0, m2);
       }
@@ -125,7 +177,7 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
       if (to < d_rows) wait_for(d, static_cast<size_t>(l.supernode_of[drow[to]]), static_cast<int64_t>(t));
     }
     auto diagonal = lt.topRows(ncols);
-    const Eigen::Index bad = Eigen::internal::llt_inplace<double, Eigen::Lower>::blocked(diagonal);
+    const Eigen::Index bad = blocked_llt(diagonal, share);
     // Eigen's LLT stops at a pivot that is not positive but passes NaN through; a non-finite
     // value anywhere reaches a later pivot (L_kk^2 = A_kk - sum of squares of row k).
     Eigen::Index column = bad;
@@ -148,7 +200,7 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
         diagonal.triangularView<Eigen::Lower>().transpose().solveInPlace<Eigen::OnTheRight>(band);
       };
       if (share && n_below >= 96 && static_cast<double>(n_below * ncols * ncols) >= share->min_flops) {
-        share_rows((n_below / 48) * 24, n_below, solve_rows);
+        share_rows(*share, (n_below / 48) * 24, n_below, solve_rows);
       } else {
         solve_rows(0, n_below);
       }
