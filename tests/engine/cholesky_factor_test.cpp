@@ -366,8 +366,9 @@ TEST(CholeskyFactor, FactorsOnTwoThreadsBitForBitAsOnOne) {
   }
   {
     // Wider separators: top products to share (11 with CHOLMOD's ordering), of rows not multiples
-    // of the register tile. The comparison fails if a shared product sums in another order
-    // (checked by splitting one along its depth).
+    // of the register tile, and a root of 510 columns whose dense LLT is shared too. The
+    // comparison fails if a shared product sums in another order (checked by splitting one, and
+    // the LLT's second band's product, along its depth).
     const Sparse wide = with_blocks(wide_grid(60, 56, 2), block);
     const int64_t before = g_shared_products.load();
     const auto wide_one = factor(wide, nullptr, false, failure);
