@@ -50,11 +50,15 @@ int NonlinearShell::workers(int requested) const {
   return requested > 0 ? std::min(requested, most) : most;
 }
 
+int NonlinearShell::pass_threads(const Rule& rule) const {
+  return rule.points < 2048 ? 1 : workers(threads_);  // (fewer points: a second thread costs more than it saves)
+}
+
 template <class Fn>
 void NonlinearShell::for_each_element(const Rule& rule, Fn&& fn) const {
   // Chunks of about the same number of points, so both threads finish together.
   constexpr size_t kPointsPerChunk = 1024;
-  const int threads = rule.points < 2 * kPointsPerChunk ? 1 : workers(threads_);
+  const int threads = pass_threads(rule);
   if (threads == 1) {
     for (size_t e = 0; e < rule.elements.size(); ++e) fn(e);
     return;
@@ -78,7 +82,7 @@ template <class Fn>
 void NonlinearShell::for_each_control_point_range(const Rule& rule, Fn&& fn) const {
   constexpr int64_t kPointsPerChunk = 64;
   const auto n = static_cast<int64_t>(rule.touch_start.size()) - 1;
-  const int threads = rule.points < 2048 ? 1 : workers(threads_);
+  const int threads = pass_threads(rule);
   if (threads == 1) {
     fn(int32_t{0}, static_cast<int32_t>(n));
     return;

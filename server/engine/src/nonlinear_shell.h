@@ -163,9 +163,10 @@ class NonlinearShell {
   // `gauss`: the Gauss points per direction of the cells' rules (the face's first).
   void build_rule(const std::vector<Cell>& cells, const std::vector<int>& gauss, int threads, Rule& rule) const;
   static Eigen::MatrixXd element_basis(const Rule& rule, const Element& e);  // 6P x m
+  int pass_threads(const Rule& rule) const;  // the threads a pass over `rule` runs on
   template <class Fn>
   void for_each_element(const Rule& rule, Fn&& fn) const;
-  // fn(p) for every control point p, on the threads for_each_element would use.
+  // fn(p) for every control point p, on pass_threads(rule) threads.
   template <class Fn>
   void for_each_control_point(const Rule& rule, Fn&& fn) const;
   // fn(begin, end) for ranges of control points that cover them all.

@@ -34,13 +34,27 @@ void share_rows(const SupernodalShare& share, Eigen::Index split, Eigen::Index e
   share.run(share.context, [](void* argument, int part) { (*static_cast<decltype(band)*>(argument))(part); }, &band);
 }
 
+// fn(r0, r1) over rows [0, rows): as two bands on share's threads where there is a share, 96 rows
+// or more and `flops` of work worth it; else fn(0, rows). The second band starts at a multiple of
+// 24 rows, so Eigen gives every row the same micro-kernel (and the same sum order) as in one
+// product or solve over all rows: its row blocks are multiples of its register tile (6 rows in
+// the baseline build, 12 with AVX2), and its depth blocking depends on the depth alone.
+template <class Fn>
+void in_bands(const SupernodalShare* share, Eigen::Index rows, double flops, const Fn& fn) {
+  if (share && rows >= 96 && flops >= share->min_flops) {
+    share_rows(*share, (rows / 48) * 24, rows, fn);
+  } else {
+    fn(0, rows);
+  }
+}
+
 // Eigen's blocked LLT (Eigen/src/Cholesky/LLT.h, llt_inplace<Scalar, Lower>::blocked) step by step,
 // with its triangular solves and rank updates split into two bands of rows where `share` and the
-// work allow. A band starts at a multiple of 24 rows, and the rank update's second band is a
-// product left of its diagonal block and a rank update on it: every entry is summed by the same
-// micro-kernel in the same order as in the whole update (Eigen's row blocks there are multiples
-// of its register tile but the last; its depth, the block size, is never blocked), so the factor
-// is the same bit for bit. Returns the first column whose pivot is not positive, or -1.
+// work allow. A band starts at a multiple of 24 rows (in_bands), and the rank update's second
+// band is a product left of its diagonal block and a rank update on it: every entry is summed by
+// the same micro-kernel in the same order as in the whole update (Eigen's row blocks there are
+// multiples of its register tile but the last; its depth, the block size, is never blocked), so
+// the factor is the same bit for bit. Returns the first column whose pivot is not positive, or -1.
 template <class MatrixType>
 Eigen::Index blocked_llt(MatrixType& m, const SupernodalShare* share) {
   using Eigen::Dynamic;
@@ -162,16 +176,7 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
           for (Eigen::Index ii = std::max(jj, r0); ii < r1; ++ii) lt(map[static_cast<size_t>(drow[from + ii])], col) -= c(ii, jj);
         }
       };
-      if (share && m1 >= 8 && m2 >= 96 && 2.0 * static_cast<double>(m2 * m1 * d_cols) >= share->min_flops) {
-        // Two threads, a band each. The second starts at a multiple of 24 rows, so Eigen gives
-        // every row the same micro-kernel (and the same sum order) as in the whole product: its
-        // row blocks are multiples of its register tile (6 rows in the baseline build, 12 with
-        // AVX2), and its depth blocking depends on d_cols alone.
-        const Eigen::Index split = (m2 / 48) * 24;
-        share_rows(*share, split, m2, update_rows);
-      } else {
-        update_rows(0, m2);
-      }
+      in_bands(m1 >= 8 ? share : nullptr, m2, 2.0 * static_cast<double>(m2 * m1 * d_cols), update_rows);
       links.next_row[ds] = to;
       // d's next rows are in a later supernode: wait there.
       if (to < d_rows) wait_for(d, static_cast<size_t>(l.supernode_of[drow[to]]), static_cast<int64_t>(t));
@@ -194,16 +199,11 @@ SupernodalOutcome SOFTSHELL_KERNEL_ENTRY(const SupernodalLayout& l, const Supern
     low = std::min(low, diagonal.diagonal().minCoeff());
     if (nrows > ncols) {
       const Eigen::Index n_below = nrows - ncols;
-      // Each row of the rows below is solved on its own (bands of 24 rows: as for the products).
-      auto solve_rows = [&](Eigen::Index r0, Eigen::Index r1) {
+      // Each row of the rows below is solved on its own.
+      in_bands(share, n_below, static_cast<double>(n_below * ncols * ncols), [&](Eigen::Index r0, Eigen::Index r1) {
         auto band = lt.middleRows(ncols + r0, r1 - r0);
         diagonal.triangularView<Eigen::Lower>().transpose().solveInPlace<Eigen::OnTheRight>(band);
-      };
-      if (share && n_below >= 96 && static_cast<double>(n_below * ncols * ncols) >= share->min_flops) {
-        share_rows(*share, (n_below / 48) * 24, n_below, solve_rows);
-      } else {
-        solve_rows(0, n_below);
-      }
+      });
       links.next_row[t] = ncols;
       wait_for(static_cast<int32_t>(t), static_cast<size_t>(l.supernode_of[rows[ncols]]), static_cast<int64_t>(t));
     }

@@ -46,7 +46,7 @@ struct SupernodalScratch {
 struct SupernodalShare {
   void (*run)(void* context, void (*task)(void* argument, int part), void* argument) = nullptr;
   void* context = nullptr;
-  double min_flops = 2e6;  // work below this many flops stays on one thread
+  double min_flops = std::numeric_limits<double>::infinity();  // less work stays on one thread
 };
 
 namespace supernodal_kernel {
