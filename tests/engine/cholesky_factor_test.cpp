@@ -36,18 +36,23 @@ Sparse upper_of(const Sparse& a) {
   return u;
 }
 
-// A 2D grid Laplacian (nx x ny nodes, 5-point) plus `shift` on the diagonal.
-Sparse grid_laplacian(int nx, int ny, double shift) {
+// A graph Laplacian on a 2D grid (nx x ny nodes): node (i, j) couples with (i + di, j + dj) by
+// weight w for each {di, dj, w} of `stencil` inside the grid; plus `shift` on the diagonal.
+struct Coupling {
+  int di, dj;
+  double w;
+};
+Sparse grid_graph(int nx, int ny, const std::vector<Coupling>& stencil, double shift) {
   std::vector<Eigen::Triplet<double>> t;
   auto id = [&](int i, int j) { return j * nx + i; };
   for (int j = 0; j < ny; ++j) {
     for (int i = 0; i < nx; ++i) {
       double degree = 0.0;
-      for (auto [di, dj] : {std::pair{1, 0}, std::pair{-1, 0}, std::pair{0, 1}, std::pair{0, -1}}) {
+      for (const auto& [di, dj, w] : stencil) {
         const int i2 = i + di, j2 = j + dj;
         if (i2 < 0 || i2 >= nx || j2 < 0 || j2 >= ny) continue;
-        t.emplace_back(id(i, j), id(i2, j2), -1.0);
-        degree += 1.0;
+        t.emplace_back(id(i, j), id(i2, j2), -w);
+        degree += w;
       }
       t.emplace_back(id(i, j), id(i, j), degree + shift);
     }
@@ -57,29 +62,21 @@ Sparse grid_laplacian(int nx, int ny, double shift) {
   return a;
 }
 
+// A 2D grid Laplacian (nx x ny nodes, 5-point) plus `shift` on the diagonal.
+Sparse grid_laplacian(int nx, int ny, double shift) {
+  return grid_graph(nx, ny, {{1, 0, 1.0}, {-1, 0, 1.0}, {0, 1, 1.0}, {0, -1, 1.0}}, shift);
+}
+
 // A grid whose nodes couple with every node within `radius` steps in each direction (as control
 // points of a subdivision surface do): wider separators, so larger dense blocks in the factor.
 Sparse wide_grid(int nx, int ny, int radius) {
-  std::vector<Eigen::Triplet<double>> t;
-  auto id = [&](int i, int j) { return j * nx + i; };
-  for (int j = 0; j < ny; ++j) {
-    for (int i = 0; i < nx; ++i) {
-      double degree = 0.0;
-      for (int dj = -radius; dj <= radius; ++dj) {
-        for (int di = -radius; di <= radius; ++di) {
-          const int i2 = i + di, j2 = j + dj;
-          if ((di == 0 && dj == 0) || i2 < 0 || i2 >= nx || j2 < 0 || j2 >= ny) continue;
-          const double w = 1.0 / (std::abs(di) + std::abs(dj));
-          t.emplace_back(id(i, j), id(i2, j2), -w);
-          degree += w;
-        }
-      }
-      t.emplace_back(id(i, j), id(i, j), degree + 0.05);
+  std::vector<Coupling> stencil;
+  for (int dj = -radius; dj <= radius; ++dj) {
+    for (int di = -radius; di <= radius; ++di) {
+      if (di != 0 || dj != 0) stencil.push_back({di, dj, 1.0 / (std::abs(di) + std::abs(dj))});
     }
   }
-  Sparse a(nx * ny, nx * ny);
-  a.setFromTriplets(t.begin(), t.end());
-  return a;
+  return grid_graph(nx, ny, stencil, 0.05);
 }
 
 // kron(graph, block): three coupled DOFs per node, as in the shell's stiffness; every node's
