@@ -7,8 +7,10 @@
 // 8 MB or more, and catmark_righthanded below it)
 // Prints, per mesh: the factor, whether its tree split into two halves, and the median (90th
 // percentile) of the sweeps on one thread (the backend's own: CHOLMOD's BLAS or the GPL-free
-// one's) and on two, and of a refactorization into the same analysis on one thread and on two
-// (supernodal_numeric.h).
+// one's) and on two, the same for a factor whose sweeps read L rounded to single precision (the
+// nonlinear solver's preconditioners, SweepPrecision::kSingle) and how far its solve is from the
+// exact one, and of a refactorization into the same analysis on one thread and on two
+// (supernodal_numeric.h), the latter also with the single-precision copy made.
 
 #include <algorithm>
 #include <cstdio>
@@ -81,8 +83,9 @@ int main(int argc, char** argv) {
               "with other data before each; median (p90)\n\n",
               repeats);
   std::printf("| mesh | DOFs | factor | split in two | backend's, one thread | ours, one thread | ours, two threads | speed-up | "
-              "refactorization, one thread | two threads | speed-up |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+              "single, one thread | single, two threads | single's solve off by | "
+              "refactorization, one thread | two threads | speed-up | two threads, with single |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   ThreadPool pool(2);
   OneThreadClaimingTwo inline_pool;
   for (const std::string& name : meshes) {
@@ -107,6 +110,11 @@ int main(int argc, char** argv) {
                                               std::shared_ptr<Executor>(&pool, [](Executor*) {}));
     const engine::internal::Factorization ours(model->stiffness(), fixed, {}, nullptr, Eigen::MatrixXd(),
                                                std::shared_ptr<Executor>(&inline_pool, [](Executor*) {}));
+    constexpr auto kSingle = engine::internal::SweepPrecision::kSingle;
+    const engine::internal::Factorization one_single(model->stiffness(), fixed, {}, nullptr, Eigen::MatrixXd(), nullptr,
+                                                     kSingle);
+    const engine::internal::Factorization two_single(model->stiffness(), fixed, {}, nullptr, Eigen::MatrixXd(),
+                                                     std::shared_ptr<Executor>(&pool, [](Executor*) {}), kSingle);
     Eigen::MatrixXd b = Eigen::MatrixXd::Random(static_cast<Eigen::Index>(one.factored().size()), 1);
     const Eigen::MatrixXd x1 = one.backward(one.forward(b)), x2 = two.backward(two.forward(b));
     const double difference = (x2 - x1).norm() / x1.norm();
@@ -114,28 +122,36 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "%s: two threads answer differently (%.1e)\n", name.c_str(), difference);
       return 1;
     }
-    Timing t1, t_ours, t2;
+    const double single_difference = (one_single.backward(one_single.forward(b)) - x1).norm() / x1.norm();
+    Timing t1, t_ours, t2, ts1, ts2;
     for (int round = 0; round < 2; ++round) {  // interleaved
       t1 = time_pass(repeats, [&] { b = one.backward(one.forward(b)); b.normalize(); });
       t_ours = time_pass(repeats, [&] { b = ours.backward(ours.forward(b)); b.normalize(); });
       t2 = time_pass(repeats, [&] { b = two.backward(two.forward(b)); b.normalize(); });
+      ts1 = time_pass(repeats, [&] { b = one_single.backward(one_single.forward(b)); b.normalize(); });
+      ts2 = time_pass(repeats, [&] { b = two_single.backward(two_single.forward(b)); b.normalize(); });
     }
     // The numeric factorization into the same analysis (as the nonlinear solver refactors its
     // preconditioner), on one thread and on two (supernodal_numeric.h).
     const int refactorizations = std::max(3, repeats / 10);
-    Timing f1, f2;
+    Timing f1, f2, f2s;
     for (int round = 0; round < 2; ++round) {
       f1 = time_pass(refactorizations, [&] { engine::internal::Factorization again(model->stiffness(), fixed, {}, &one); });
       f2 = time_pass(refactorizations, [&] {
         engine::internal::Factorization again(model->stiffness(), fixed, {}, &two, Eigen::MatrixXd(),
                                               std::shared_ptr<Executor>(&pool, [](Executor*) {}));
       });
+      f2s = time_pass(refactorizations, [&] {
+        engine::internal::Factorization again(model->stiffness(), fixed, {}, &two_single, Eigen::MatrixXd(),
+                                              std::shared_ptr<Executor>(&pool, [](Executor*) {}), kSingle);
+      });
     }
-    std::printf("| %s | %d | %.1f MiB | %s | %.2f (%.2f) ms | %.2f (%.2f) ms | %.2f (%.2f) ms | %.2f | %.1f (%.1f) ms | "
-                "%.1f (%.1f) ms | %.2f |\n",
+    std::printf("| %s | %d | %.1f MiB | %s | %.2f (%.2f) ms | %.2f (%.2f) ms | %.2f (%.2f) ms | %.2f | %.2f (%.2f) ms | "
+                "%.2f (%.2f) ms | %.1e | %.1f (%.1f) ms | %.1f (%.1f) ms | %.2f | %.1f (%.1f) ms |\n",
                 name.c_str(), model->num_dofs(), static_cast<double>(one.bytes()) / (1 << 20),
                 two.two_thread_sweeps() ? "yes" : "no", t1.p50, t1.p90, t_ours.p50, t_ours.p90, t2.p50, t2.p90,
-                t1.p50 / t2.p50, f1.p50, f1.p90, f2.p50, f2.p90, f1.p50 / f2.p50);
+                t1.p50 / t2.p50, ts1.p50, ts1.p90, ts2.p50, ts2.p90, single_difference, f1.p50, f1.p90, f2.p50, f2.p90,
+                f1.p50 / f2.p50, f2s.p50, f2s.p90);
   }
   return 0;
 }

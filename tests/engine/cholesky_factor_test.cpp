@@ -322,6 +322,55 @@ TEST(CholeskyFactor, SweepsOnTwoThreadsSolveAsOnOne) {
   EXPECT_LT(relative_error(f->backward(y, &pool), reference.solve(local)), 1e-11);
 }
 
+// A factor whose sweeps read L rounded to single precision (the nonlinear solver's preconditioners):
+// every sweep, of one column or several, on one thread or two, is one with the same rounded L~, so
+// a solve is exact for A~ = L~ L~^T (the constrained solves on top of it rely on that), and A~ is
+// within float's rounding of A. A matrix whose L would leave float's range keeps exact sweeps.
+TEST(CholeskyFactor, SingleSweepsSolveWithTheRoundedFactor) {
+  const ScopedKnob<int64_t> plan_any_size(g_two_thread_sweep_entries, 0);
+  const Sparse a = with_blocks(grid_laplacian(40, 36, 0.05), node_block());  // supernodal in both backends
+  ThreadPool pool(2);
+  CholeskyFactor::Failure failure;
+  const auto exact = factor_of(a);
+  const auto single = CholeskyFactor::factorize(upper_of(a), nullptr, failure, &pool, SweepPrecision::kSingle);
+  ASSERT_TRUE(exact && single);
+  ASSERT_FALSE(exact->single_precision_sweeps());
+  ASSERT_TRUE(single->single_precision_sweeps());
+  ASSERT_TRUE(single->two_thread_sweeps());
+  EXPECT_EQ(single->min_pivot(), exact->min_pivot()) << "the pivots are the factorization's own";
+  EXPECT_GT(single->bytes(), exact->bytes());
+
+  const Eigen::MatrixXd b = random_rhs(a.rows(), 3, 29u);
+  const Eigen::MatrixXd x = exact->backward(exact->forward(b));
+  // One column at a time (the single-precision kernels) and three at once (blocks widened to
+  // double), on one thread and on two: the same operator to double round-off.
+  const Eigen::MatrixXd y3 = single->forward(b), x3 = single->backward(y3);
+  for (Executor* executor : {static_cast<Executor*>(nullptr), static_cast<Executor*>(&pool)}) {
+    SCOPED_TRACE(executor ? "two threads" : "one thread");
+    for (Eigen::Index c = 0; c < b.cols(); ++c) {
+      const Eigen::MatrixXd y1 = single->forward(b.col(c), nullptr, executor);
+      EXPECT_LT(relative_error(y1, y3.col(c)), 1e-13) << "forward, column " << c;
+      EXPECT_LT(relative_error(single->backward(y1, executor), x3.col(c)), 1e-13) << "backward, column " << c;
+      EXPECT_LT(relative_error(single->backward(y3.col(c), executor), x3.col(c)), 1e-13);
+    }
+  }
+  // Forward and backward sweep the same L~: forward(B)^T forward(B) = B^T A~^-1 B.
+  EXPECT_LT(relative_error(y3.transpose() * y3, b.transpose() * x3), 1e-13);
+  // A~ is A to float's rounding: the solve is off by about that times the condition number (a few
+  // hundred here), and not exact (the rounded L is in use).
+  const double off = relative_error(x3, x);
+  EXPECT_GT(off, 1e-12);
+  EXPECT_LT(off, 1e-5);
+  EXPECT_LT(relative_error(a * x3, b), 1e-5);
+
+  // Scaled far out of float's range (L ~ 1e40): exact sweeps, not infinities.
+  const Sparse huge = a * 1e80;
+  const auto kept = CholeskyFactor::factorize(upper_of(huge), nullptr, failure, &pool, SweepPrecision::kSingle);
+  ASSERT_TRUE(kept);
+  EXPECT_FALSE(kept->single_precision_sweeps());
+  EXPECT_LT(relative_error(kept->backward(kept->forward(b)), x * 1e-80), 1e-11);
+}
+
 // The numeric factorization on two threads (supernodal_numeric.h: both halves of the tree at once,
 // then the top): the same factor bit for bit as on one thread, for a fresh analysis and a reused
 // one, and the same refusal (the same column, the same finiteness) wherever the failing pivot lies,

@@ -255,6 +255,7 @@ struct CholeskyFactor::State {
   uint64_t analysis = 0;  // which analysis l is of (SpareFactors)
   std::shared_ptr<const SupernodalPlan> plan;  // a supernodal factor's, shared by its analysis' factors
   SupernodalLayout layout;
+  std::unique_ptr<float[]> single;  // L rounded to single precision (SweepPrecision::kSingle)
   const TwoThreadSweeps* sweeps() const { return plan ? plan->sweeps.get() : nullptr; }
   ~State() {
     if (l) g_spare_factors.keep(analysis, l);
@@ -264,7 +265,7 @@ struct CholeskyFactor::State {
   Eigen::MatrixXd apply(int system, const Eigen::MatrixXd& rhs) const;
   // The forward sweep over the supernodes reachable from the nonzero rows of P B (plan_forward),
   // unless that is most of the factor and one thread sweeps it: false (and `x` untouched), for
-  // CHOLMOD's sweep is faster on one.
+  // CHOLMOD's sweep is faster on one. (Not for a single-precision factor: CHOLMOD reads L itself.)
   bool own_forward(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x, double& fraction_read, Executor* executor) const;
 };
 
@@ -275,7 +276,7 @@ const char* CholeskyFactor::backend() { return "CHOLMOD supernodal"; }
 
 std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMatrix<double>& upper,
                                                           const CholeskyFactor* same_pattern, Failure& failure,
-                                                          Executor* executor) {
+                                                          Executor* executor, SweepPrecision precision) {
   failure = Failure{};
   // A view of `upper` as a cholmod_sparse (stype 1: the upper triangle is read); CHOLMOD does not
   // write to its input.
@@ -362,7 +363,13 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
     return nullptr;
   }
   state->l = l;
-  if (state->plan) state->layout = state->plan->layout(l);
+  if (state->plan) {
+    state->layout = state->plan->layout(l);
+    if (precision == SweepPrecision::kSingle) {
+      state->single = single_copy(state->layout, upper, executor);
+      state->layout.single = state->single.get();
+    }
+  }
   return std::unique_ptr<CholeskyFactor>(new CholeskyFactor(std::move(state)));
 }
 
@@ -374,6 +381,7 @@ size_t CholeskyFactor::bytes() const {
   size_t bytes = l->is_super ? l->xsize * sizeof(double) + l->ssize * int_size + (3 * l->nsuper + 3) * int_size
                              : l->nzmax * (sizeof(double) + int_size);
   if (state_->plan) bytes += state_->plan->bytes();  // shared by its analysis' factors; counted with each
+  if (state_->single) bytes += static_cast<size_t>(state_->layout.entries()) * sizeof(float);
   return bytes + 4 * l->n * int_size;
 }
 
@@ -439,7 +447,7 @@ bool CholeskyFactor::State::own_forward(const Eigen::MatrixXd& rhs, Eigen::Matri
     if (!rhs.row(perm ? perm[k] : k).isZero(0.0)) reached[static_cast<size_t>(layout.supernode_of[k])] = 1;
   }
   const ForwardSweep route = plan_forward(layout, sweeps(), executor, reached);
-  if (route.whole && !route.two_threads) return false;
+  if (route.whole && !route.two_threads && !layout.single) return false;
   x.resize(n, rhs.cols());
   for (Eigen::Index k = 0; k < n; ++k) x.row(k) = rhs.row(perm ? perm[k] : k);
   if (route.two_threads) {
@@ -448,9 +456,11 @@ bool CholeskyFactor::State::own_forward(const Eigen::MatrixXd& rhs, Eigen::Matri
     fraction_read = route.whole ? 1.0 : static_cast<double>(route.work) / static_cast<double>(layout.entries());
     return true;
   }
-  for (int64_t s = 0; s < layout.supernodes; ++s) {
-    if (reached[static_cast<size_t>(s)]) forward_step(layout, s, x);
-  }
+  by_columns(x, [&](auto& xs) {
+    for (int64_t s = 0; s < layout.supernodes; ++s) {
+      if (reached[static_cast<size_t>(s)]) forward_step(layout, s, xs);
+    }
+  });
   fraction_read = static_cast<double>(route.work) / static_cast<double>(layout.entries());
   return true;
 }
@@ -464,11 +474,18 @@ Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* frac
 }
 
 Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* executor) const {
-  if (!on_two_threads(state_->sweeps(), executor) || y.cols() == 0) {
+  const bool two_threads = on_two_threads(state_->sweeps(), executor);
+  if ((!two_threads && !state_->single) || y.cols() == 0) {
     return state_->apply(CHOLMOD_Pt, state_->apply(CHOLMOD_Lt, y));
   }
   Eigen::MatrixXd x = y;
-  by_columns(x, [&](auto& xs) { state_->sweeps()->backward(state_->layout, xs, *executor); });
+  by_columns(x, [&](auto& xs) {
+    if (two_threads) {
+      state_->sweeps()->backward(state_->layout, xs, *executor);
+    } else {
+      for (int64_t s = state_->layout.supernodes; s-- > 0;) backward_step(state_->layout, s, xs);
+    }
+  });
   const auto* perm = static_cast<const int*>(state_->l->Perm);
   if (!perm) return x;
   Eigen::MatrixXd out(x.rows(), x.cols());
@@ -477,5 +494,7 @@ Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* exe
 }
 
 bool CholeskyFactor::two_thread_sweeps() const { return state_->sweeps() != nullptr; }
+
+bool CholeskyFactor::single_precision_sweeps() const { return state_->single != nullptr; }
 
 }  // namespace softshell::engine::internal

@@ -285,6 +285,12 @@ std::shared_ptr<const Symbolic> analyze(const Eigen::SparseMatrix<double>& upper
 struct CholeskyFactor::State {
   std::shared_ptr<const Symbolic> symbolic;
   std::vector<double> values;  // the supernodes' blocks
+  std::unique_ptr<float[]> single;  // L rounded to single precision (SweepPrecision::kSingle)
+  SupernodalLayout layout() const {
+    SupernodalLayout l = softshell::engine::internal::layout(*symbolic, values.data());
+    l.single = single.get();
+    return l;
+  }
   double min_pivot = 0.0;
 };
 
@@ -295,7 +301,7 @@ const char* CholeskyFactor::backend() { return "supernodal LL^T on Eigen's AMD (
 
 std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMatrix<double>& upper,
                                                           const CholeskyFactor* same_pattern, Failure& failure,
-                                                          Executor* executor) {
+                                                          Executor* executor, SweepPrecision precision) {
   failure = Failure{};
   try {
     auto state = std::make_unique<State>();
@@ -317,6 +323,7 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
       return nullptr;
     }
     state->min_pivot = outcome.min_diagonal * outcome.min_diagonal;
+    if (precision == SweepPrecision::kSingle) state->single = single_copy(state->layout(), upper, executor);
     return std::unique_ptr<CholeskyFactor>(new CholeskyFactor(std::move(state)));
   } catch (const std::bad_alloc&) {
     failure.out_of_memory = true;
@@ -327,16 +334,19 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
 Eigen::Index CholeskyFactor::size() const { return state_->symbolic->n; }
 
 size_t CholeskyFactor::bytes() const {
-  return state_->symbolic->bytes() + state_->values.size() * sizeof(double) + sizeof(State);
+  return state_->symbolic->bytes() + state_->values.size() * (sizeof(double) + (state_->single ? sizeof(float) : 0)) +
+         sizeof(State);
 }
 
 double CholeskyFactor::min_pivot() const { return state_->min_pivot; }
 
 bool CholeskyFactor::two_thread_sweeps() const { return state_->symbolic->sweeps != nullptr; }
 
+bool CholeskyFactor::single_precision_sweeps() const { return state_->single != nullptr; }
+
 Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* fraction_read, Executor* executor) const {
   const Symbolic& s = *state_->symbolic;
-  const SupernodalLayout l = layout(s, state_->values.data());
+  const SupernodalLayout l = state_->layout();
   // P B, and the supernodes holding its nonzero rows: the sweep starts there and reaches every
   // supernode one of them updates, in ascending order (on two threads where plan_forward says
   // so).
@@ -374,7 +384,7 @@ Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* frac
 
 Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* executor) const {
   const Symbolic& s = *state_->symbolic;
-  const SupernodalLayout l = layout(s, state_->values.data());
+  const SupernodalLayout l = state_->layout();
   const bool two_threads = on_two_threads(s.sweeps.get(), executor);
   auto sweep = [&](auto& x) {
     if (two_threads) {

@@ -25,6 +25,17 @@ namespace softshell::engine::internal {
 /// it). The Eigen build ignores it.
 extern std::atomic<size_t> g_spare_factor_bytes;
 
+/// What a factor's sweeps read.
+enum class SweepPrecision {
+  kDouble,  ///< L as factored: solves with A to round-off.
+  /// A copy of L rounded to single precision, where the factor is supernodal and its scale fits
+  /// (else as kDouble): every forward and backward sweep, of any number of columns, is then one
+  /// with that L~, so solves are exact for A~ = L~ L~^T, within 2^-23 |L| |L^T| of A (entry by
+  /// entry, to first order), and read half the bytes. For preconditioners: a sweep of a large
+  /// factor runs at the speed of memory.
+  kSingle,
+};
+
 class CholeskyFactor {
  public:
   /// Why factorize() returned no factor.
@@ -40,10 +51,11 @@ class CholeskyFactor {
   /// only the numeric factorization runs. Returns null, and says why in `failure`, if A is not
   /// positive definite, holds NaN or infinite values (never a factor with NaNs), or memory ran out.
   /// With an executor of two threads or more, a large factor is filled on two of them (the
-  /// same values bit for bit as on one: supernodal_numeric.h).
+  /// same values bit for bit as on one: supernodal_numeric.h). `precision`: what its sweeps read.
   static std::unique_ptr<CholeskyFactor> factorize(const Eigen::SparseMatrix<double>& upper,
                                                    const CholeskyFactor* same_pattern, Failure& failure,
-                                                   Executor* executor = nullptr);
+                                                   Executor* executor = nullptr,
+                                                   SweepPrecision precision = SweepPrecision::kDouble);
   ~CholeskyFactor();
   CholeskyFactor(const CholeskyFactor&) = delete;
   CholeskyFactor& operator=(const CholeskyFactor&) = delete;
@@ -60,6 +72,8 @@ class CholeskyFactor {
   /// True if sweeps with an executor run on two threads (a large supernodal factor whose tree
   /// splits well).
   bool two_thread_sweeps() const;
+  /// True if its sweeps read a single-precision copy of L (SweepPrecision::kSingle, where it applies).
+  bool single_precision_sweeps() const;
   /// The smallest pivot, min_k L_kk^2.
   double min_pivot() const;
   /// Memory held by the factor (bytes), its symbolic part included.

@@ -58,26 +58,28 @@ Factorization::Factorization(const ShellModel& model, std::vector<int32_t> fixed
                 : model.options().executor ? model.options().executor
                                            : default_executor()) {
   const auto start = std::chrono::steady_clock::now();
-  factorize(model.stiffness(), nullptr);
+  factorize(model.stiffness(), nullptr, SweepPrecision::kDouble);
   compute_pin_block(model.stiffness(), motions);
   factor_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
 Factorization::Factorization(const Eigen::SparseMatrix<double>& k, std::vector<int32_t> fixed,
                              std::vector<int32_t> pinned, const Factorization* same_pattern,
-                             const Eigen::MatrixXd& motions, std::shared_ptr<Executor> executor)
+                             const Eigen::MatrixXd& motions, std::shared_ptr<Executor> executor,
+                             SweepPrecision precision)
     : id_(g_next_factor_id++), fixed_(std::move(fixed)), pinned_(std::move(pinned)), executor_(std::move(executor)) {
   const auto start = std::chrono::steady_clock::now();
   if (same_pattern && (same_pattern->fixed_ != fixed_ || same_pattern->pinned_ != pinned_ ||
                        same_pattern->position_.size() != static_cast<size_t>(k.rows()))) {
     same_pattern = nullptr;
   }
-  factorize(k, same_pattern);
+  factorize(k, same_pattern, precision);
   compute_pin_block(k, motions);
   factor_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern) {
+void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern,
+                              SweepPrecision precision) {
   if (k.rows() != k.cols()) fail(ErrorCode::kInternal, "Factorization: the matrix is not square");
   const auto n = static_cast<size_t>(k.rows());
   position_.assign(n, -1);
@@ -99,7 +101,7 @@ void Factorization::factorize(const Eigen::SparseMatrix<double>& k, const Factor
       same_pattern && same_pattern->factor_ && same_pattern->pattern_hash_ == pattern_hash_ ? same_pattern->factor_.get()
                                                                                           : nullptr;
   CholeskyFactor::Failure failure;
-  factor_ = CholeskyFactor::factorize(a, reuse, failure, executor_.get());
+  factor_ = CholeskyFactor::factorize(a, reuse, failure, executor_.get(), precision);
   if (!factor_) {
     if (failure.out_of_memory) fail(ErrorCode::kResourceExhausted, "not enough memory to factorize K");
     const int32_t dof = failure.column >= 0 && static_cast<size_t>(failure.column) < factored_.size()
@@ -185,6 +187,8 @@ Eigen::MatrixXd Factorization::backward(const Eigen::MatrixXd& y) const {
   if (!factor_ || y.cols() == 0) return Eigen::MatrixXd::Zero(y.rows(), y.cols());
   return factor_->backward(y, executor_.get());
 }
+
+bool Factorization::single_precision_sweeps() const { return factor_ && factor_->single_precision_sweeps(); }
 
 bool Factorization::two_thread_sweeps() const {
   return factor_ && executor_ && executor_->concurrency() > 1 && factor_->two_thread_sweeps();

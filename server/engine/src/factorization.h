@@ -15,13 +15,12 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
+#include "cholesky_factor.h"
 #include "softshell/engine/shell_model.h"
 #include "softshell/executor.h"
 #include "softshell/result.h"
 
 namespace softshell::engine::internal {
-
-class CholeskyFactor;
 
 /// Thrown when K with the chosen DOFs removed is not positive definite (a mechanism the rigid-
 /// mode analysis did not catch); the solver then takes the robust path.
@@ -44,10 +43,11 @@ class Factorization {
   /// same fixed and pinned DOFs), its ordering and symbolic analysis are reused: only the numeric
   /// factorization runs (`reused_analysis()`); a factor that does not fit is ignored. `motions` as
   /// above; without them (empty) the pins' block is kept as computed. `executor`: where its sweeps
-  /// may use a second thread (none: one thread).
+  /// may use a second thread (none: one thread). `precision`: what its sweeps read; with kSingle
+  /// every solve, the pins' block included, is one with the rounded factor (a preconditioner's).
   Factorization(const Eigen::SparseMatrix<double>& k, std::vector<int32_t> fixed, std::vector<int32_t> pinned,
                 const Factorization* same_pattern = nullptr, const Eigen::MatrixXd& motions = Eigen::MatrixXd(),
-                std::shared_ptr<Executor> executor = nullptr);
+                std::shared_ptr<Executor> executor = nullptr, SweepPrecision precision = SweepPrecision::kDouble);
   ~Factorization();
   Factorization(const Factorization&) = delete;
   Factorization& operator=(const Factorization&) = delete;
@@ -65,6 +65,8 @@ class Factorization {
   double factor_ms() const { return factor_ms_; }
   /// True if its sweeps run on two threads (a large factor, an executor of two threads or more).
   bool two_thread_sweeps() const;
+  /// True if its sweeps read L rounded to single precision (SweepPrecision::kSingle, where it applies).
+  bool single_precision_sweeps() const;
   /// True if the symbolic analysis was taken from `same_pattern`.
   bool reused_analysis() const { return reused_analysis_; }
 
@@ -93,7 +95,7 @@ class Factorization {
   Eigen::MatrixXd backward(const Eigen::MatrixXd& y) const;
 
  private:
-  void factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern);
+  void factorize(const Eigen::SparseMatrix<double>& k, const Factorization* same_pattern, SweepPrecision precision);
   void compute_pin_block(const Eigen::SparseMatrix<double>& k, const Eigen::MatrixXd& motions);
 
   uint64_t id_ = 0;

@@ -571,10 +571,13 @@ void Run::refresh_tangent() {
   auto try_factor = [&] {
     ++stats_.factorizations;
     try {
-      // (Its sweeps on the solve's threads: two on a large factor, unless the solve has one.)
+      // (Its sweeps on the solve's threads: two on a large factor, unless the solve has one. They
+      // read L rounded to single precision: a preconditioner need not be exact, and a sweep of a
+      // large factor runs at the speed of memory.)
       factor = std::make_shared<const Factorization>(
           *matrix, problem_.fixed, pins_.dofs, pattern, Eigen::MatrixXd(),
-          options_.threads == 1 ? nullptr : options_.executor ? options_.executor : default_executor());
+          options_.threads == 1 ? nullptr : options_.executor ? options_.executor : default_executor(),
+          internal::SweepPrecision::kSingle);
       return true;
     } catch (const internal::FactorizationFailed&) {
       return false;

@@ -19,6 +19,9 @@ struct SupernodalLayout {
   const int32_t* rows = nullptr;
   const int32_t* supernode_of = nullptr;  // per column
   const double* values = nullptr;
+  /// If set, L rounded to single precision at the same offsets as `values`: the sweeps read this
+  /// instead (half the bytes; a preconditioner's factor, cholesky_factor.h) and compute in double.
+  const float* single = nullptr;
 
   int64_t columns() const { return supernodes > 0 ? first[supernodes] : 0; }
   int64_t entries() const { return supernodes > 0 ? value_start[supernodes] : 0; }

@@ -6,7 +6,9 @@
 #include "supernodal_sweeps.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
+#include <cstring>
 
 namespace softshell::engine::internal {
 
@@ -16,21 +18,170 @@ namespace {
 
 using ConstBlock = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
 
+// Supernode s's block: L's own values, or (a single-precision factor) its values widened to double
+// into a buffer of the calling thread, valid until its next call.
 ConstBlock block_of(const SupernodalLayout& l, int64_t s) {
   const Eigen::Index ncols = l.first[s + 1] - l.first[s], nrows = l.row_start[s + 1] - l.row_start[s];
-  return ConstBlock(l.values + l.value_start[s], nrows, ncols, Eigen::OuterStride<>(nrows));
+  if (!l.single) return ConstBlock(l.values + l.value_start[s], nrows, ncols, Eigen::OuterStride<>(nrows));
+  thread_local std::vector<double> widened;
+  const float* from = l.single + l.value_start[s];
+  widened.assign(from, from + nrows * ncols);
+  return ConstBlock(widened.data(), nrows, ncols, Eigen::OuterStride<>(nrows));
 }
+
+// The kernels of a single-precision factor's sweeps with one right-hand side: L's entries widened
+// to double as they are read, every sum in double. Compiled twice, for x86-64-v3 (AVX2, FMA)
+// where the CPU has it and for the baseline, like the nonlinear shell's point kernels.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define SOFTSHELL_SWEEP_KERNEL __attribute__((target_clones("arch=x86-64-v3", "default")))
+#else
+#define SOFTSHELL_SWEEP_KERNEL
+#endif
+
+using Wide = double __attribute__((vector_size(32)));
+using Narrow = float __attribute__((vector_size(16)));
+
+// (Always inlined: no call passes a vector across the two builds' ABIs.)
+#pragma GCC diagnostic ignored "-Wpsabi"
+[[gnu::always_inline]] inline Wide widen(const float* a) {
+  Narrow n;
+  std::memcpy(&n, a, sizeof n);
+  return __builtin_convertvector(n, Wide);
+}
+[[gnu::always_inline]] inline Wide load(const double* a) {
+  Wide w;
+  std::memcpy(&w, a, sizeof w);
+  return w;
+}
+[[gnu::always_inline]] inline void store(double* a, Wide w) { std::memcpy(a, &w, sizeof w); }
+
+// y[0, n) += A (sign x), A's m columns `stride` apart (sign: +1 or -1, so y -= A x exactly as
+// a subtraction would round). Four columns a pass: y is read and written a quarter as often.
+SOFTSHELL_SWEEP_KERNEL void multiply_add(const float* a, int64_t stride, int64_t n, int64_t m, const double* x,
+                                         double sign, double* y) {
+  int64_t k = 0;
+  for (; k + 4 <= m; k += 4) {
+    const float *a0 = a + k * stride, *a1 = a0 + stride, *a2 = a1 + stride, *a3 = a2 + stride;
+    const double s0 = sign * x[k], s1 = sign * x[k + 1], s2 = sign * x[k + 2], s3 = sign * x[k + 3];
+    const Wide x0 = Wide{} + s0, x1 = Wide{} + s1, x2 = Wide{} + s2, x3 = Wide{} + s3;
+    int64_t i = 0;
+    for (; i + 4 <= n; i += 4) {
+      store(y + i, load(y + i) + ((widen(a0 + i) * x0 + widen(a1 + i) * x1) + (widen(a2 + i) * x2 + widen(a3 + i) * x3)));
+    }
+    for (; i < n; ++i) {
+      y[i] += (static_cast<double>(a0[i]) * s0 + static_cast<double>(a1[i]) * s1) +
+              (static_cast<double>(a2[i]) * s2 + static_cast<double>(a3[i]) * s3);
+    }
+  }
+  for (; k < m; ++k) {
+    const float* col = a + k * stride;
+    const double sk = sign * x[k];
+    const Wide xk = Wide{} + sk;
+    int64_t i = 0;
+    for (; i + 4 <= n; i += 4) store(y + i, load(y + i) + widen(col + i) * xk);
+    for (; i < n; ++i) y[i] += static_cast<double>(col[i]) * sk;
+  }
+}
+
+// y[0, m) -= A^T b, A (n x m) as above. Four columns a pass, each its own chain of sums.
+SOFTSHELL_SWEEP_KERNEL void subtract_transposed(const float* a, int64_t stride, int64_t n, int64_t m, const double* b,
+                                                double* y) {
+  auto finish = [](Wide w) { return (w[0] + w[1]) + (w[2] + w[3]); };
+  int64_t k = 0;
+  for (; k + 4 <= m; k += 4) {
+    const float *a0 = a + k * stride, *a1 = a0 + stride, *a2 = a1 + stride, *a3 = a2 + stride;
+    Wide d0{}, d1{}, d2{}, d3{};
+    int64_t i = 0;
+    for (; i + 4 <= n; i += 4) {
+      const Wide bi = load(b + i);
+      d0 += widen(a0 + i) * bi;
+      d1 += widen(a1 + i) * bi;
+      d2 += widen(a2 + i) * bi;
+      d3 += widen(a3 + i) * bi;
+    }
+    double e0 = finish(d0), e1 = finish(d1), e2 = finish(d2), e3 = finish(d3);
+    for (; i < n; ++i) {
+      e0 += static_cast<double>(a0[i]) * b[i];
+      e1 += static_cast<double>(a1[i]) * b[i];
+      e2 += static_cast<double>(a2[i]) * b[i];
+      e3 += static_cast<double>(a3[i]) * b[i];
+    }
+    y[k] -= e0;
+    y[k + 1] -= e1;
+    y[k + 2] -= e2;
+    y[k + 3] -= e3;
+  }
+  for (; k < m; ++k) {
+    const float* col = a + k * stride;
+    Wide d0{}, d1{};
+    int64_t i = 0;
+    for (; i + 8 <= n; i += 8) {
+      d0 += widen(col + i) * load(b + i);
+      d1 += widen(col + i + 4) * load(b + i + 4);
+    }
+    double e = finish(d0 + d1);
+    for (; i < n; ++i) e += static_cast<double>(col[i]) * b[i];
+    y[k] -= e;
+  }
+}
+
+// The diagonal blocks' triangular solves go by panels of this many columns: the small triangle
+// of a panel by scalars, the rest of its columns by the four-column kernels above.
+constexpr int64_t kPanel = 4;
+
+// x[0, c) := T^-1 x, T the c x c lower triangle at `a` (columns `stride` apart).
+void lower_solve(const float* a, int64_t stride, int64_t c, double* x) {
+  for (int64_t j0 = 0; j0 < c; j0 += kPanel) {
+    const int64_t end = std::min(c, j0 + kPanel);
+    for (int64_t j = j0; j < end; ++j) {
+      const float* col = a + j * stride;
+      x[j] /= static_cast<double>(col[j]);
+      for (int64_t i = j + 1; i < end; ++i) x[i] -= static_cast<double>(col[i]) * x[j];
+    }
+    if (end < c) multiply_add(a + j0 * stride + end, stride, c - end, end - j0, x + j0, -1.0, x + end);
+  }
+}
+
+// x[0, c) := T^-T x.
+void lower_transposed_solve(const float* a, int64_t stride, int64_t c, double* x) {
+  for (int64_t j0 = (c - 1) / kPanel * kPanel; j0 >= 0; j0 -= kPanel) {
+    const int64_t end = std::min(c, j0 + kPanel);
+    if (end < c) subtract_transposed(a + j0 * stride + end, stride, c - end, end - j0, x + end, x + j0);
+    for (int64_t j = end; j-- > j0;) {
+      const float* col = a + j * stride;
+      double sum = x[j];
+      for (int64_t i = j + 1; i < end; ++i) sum -= static_cast<double>(col[i]) * x[i];
+      x[j] = sum / static_cast<double>(col[j]);
+    }
+  }
+}
+
+template <class X>
+constexpr bool kOneColumn = X::ColsAtCompileTime == 1;
 
 // Supernode s's forward step: its columns of x solved with its diagonal block, then its rows below
 // updated through `subtract(row, i, update)` (x.row(row) -= update.row(i) on one thread).
 template <class X, class Subtract>
 void forward_step_with(const SupernodalLayout& l, int64_t s, X& x, Subtract&& subtract) {
+  const Eigen::Index ncols = l.first[s + 1] - l.first[s], nrows = l.row_start[s + 1] - l.row_start[s];
+  thread_local X update;
+  if constexpr (kOneColumn<X>) {
+    if (l.single) {
+      const float* a = l.single + l.value_start[s];
+      double* xs = x.data() + l.first[s];
+      lower_solve(a, nrows, ncols, xs);
+      if (nrows == ncols) return;
+      update.setZero(nrows - ncols);
+      multiply_add(a + ncols, nrows, nrows - ncols, ncols, xs, 1.0, update.data());
+      const int32_t* below = l.rows + l.row_start[s] + ncols;
+      for (Eigen::Index i = 0; i < nrows - ncols; ++i) subtract(below[i], i, update);
+      return;
+    }
+  }
   const ConstBlock block = block_of(l, s);
-  const Eigen::Index ncols = block.cols(), nrows = block.rows();
   auto xs = x.middleRows(l.first[s], ncols);
   block.topRows(ncols).template triangularView<Eigen::Lower>().solveInPlace(xs);
   if (nrows == ncols) return;
-  thread_local X update;
   update.noalias() = block.bottomRows(nrows - ncols) * xs;
   const int32_t* below = l.rows + l.row_start[s] + ncols;
   for (Eigen::Index i = 0; i < nrows - ncols; ++i) subtract(below[i], i, update);
@@ -45,17 +196,61 @@ void forward_step(const SupernodalLayout& l, int64_t s, X& x) {
 
 template <class X>
 void backward_step(const SupernodalLayout& l, int64_t s, X& x) {
-  const ConstBlock block = block_of(l, s);
-  const Eigen::Index ncols = block.cols(), nrows = block.rows();
-  auto xs = x.middleRows(l.first[s], ncols);
+  const Eigen::Index ncols = l.first[s + 1] - l.first[s], nrows = l.row_start[s + 1] - l.row_start[s];
+  const int32_t* below = l.rows + l.row_start[s] + ncols;
+  thread_local X gathered;
   if (nrows > ncols) {
-    thread_local X gathered;
     gathered.resize(nrows - ncols, x.cols());
-    const int32_t* below = l.rows + l.row_start[s] + ncols;
     for (Eigen::Index i = 0; i < nrows - ncols; ++i) gathered.row(i) = x.row(below[i]);
-    xs.noalias() -= block.bottomRows(nrows - ncols).transpose() * gathered;
   }
+  if constexpr (kOneColumn<X>) {
+    if (l.single) {
+      const float* a = l.single + l.value_start[s];
+      double* xs = x.data() + l.first[s];
+      if (nrows > ncols) subtract_transposed(a + ncols, nrows, nrows - ncols, ncols, gathered.data(), xs);
+      lower_transposed_solve(a, nrows, ncols, xs);
+      return;
+    }
+  }
+  const ConstBlock block = block_of(l, s);
+  auto xs = x.middleRows(l.first[s], ncols);
+  if (nrows > ncols) xs.noalias() -= block.bottomRows(nrows - ncols).transpose() * gathered;
   block.topRows(ncols).template triangularView<Eigen::Lower>().transpose().solveInPlace(xs);
+}
+
+std::unique_ptr<float[]> single_copy(const SupernodalLayout& l, const Eigen::SparseMatrix<double>& upper,
+                                     Executor* executor) {
+  // Well inside float's range (about 1e-38 to 3e38), so that sums of a few products stay in it too.
+  constexpr double kLargest = 1e30, kSmallestPivot = 1e-30;
+  double largest_diagonal = 0.0;
+  const int* outer = upper.outerIndexPtr();
+  const int* inner = upper.innerIndexPtr();
+  for (Eigen::Index j = 0; j < upper.outerSize(); ++j) {
+    const int end = upper.isCompressed() ? outer[j + 1] : outer[j] + upper.innerNonZeroPtr()[j];
+    for (int p = end; p-- > outer[j] && inner[p] >= j;) {  // rows ascending: the diagonal is last
+      if (inner[p] == j) largest_diagonal = std::max(largest_diagonal, upper.valuePtr()[p]);
+    }
+  }
+  if (!(std::sqrt(largest_diagonal) < kLargest)) return nullptr;
+  for (int64_t s = 0; s < l.supernodes; ++s) {
+    const int64_t nrows = l.row_start[s + 1] - l.row_start[s];
+    for (int64_t j = 0; j < l.first[s + 1] - l.first[s]; ++j) {
+      if (!(std::abs(l.values[l.value_start[s] + j * nrows + j]) > kSmallestPivot)) return nullptr;
+    }
+  }
+  const int64_t n = l.entries();
+  std::unique_ptr<float[]> out(new float[static_cast<size_t>(std::max<int64_t>(n, 1))]);
+  const int parts = executor && executor->concurrency() > 1 && n >= g_two_thread_sweep_entries.load() ? 2 : 1;
+  auto convert = [&](int64_t part) {
+    const int64_t begin = n * part / parts, end = n * (part + 1) / parts;
+    for (int64_t i = begin; i < end; ++i) out[static_cast<size_t>(i)] = static_cast<float>(l.values[i]);
+  };
+  if (parts == 1) {
+    convert(0);
+  } else {
+    executor->parallel_for(0, parts, convert, parts);
+  }
+  return out;
 }
 
 int64_t reach(const SupernodalLayout& l, std::vector<char>& reached, int64_t limit) {

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/SparseCore>
 
 #include "softshell/executor.h"
 #include "supernodal_layout.h"
@@ -94,6 +95,13 @@ class TwoThreadSweeps {
 inline bool on_two_threads(const TwoThreadSweeps* plan, const Executor* executor) {
   return plan && executor && executor->concurrency() > 1;
 }
+
+/// L's values rounded to single precision (for SupernodalLayout::single), converted on two of the
+/// executor's threads if it has them and the factor is large. Null where they would leave float's
+/// range: every |L_ij| is at most sqrt(A_ii) (`upper`: A's upper triangle, diagonal included), and
+/// every pivot L_kk must stay a normal float.
+std::unique_ptr<float[]> single_copy(const SupernodalLayout& l, const Eigen::SparseMatrix<double>& upper,
+                                     Executor* executor);
 
 /// One supernode's step of a sweep on one thread (the backends' own sweeps and the plan's share
 /// them, so the arithmetic is the same).
