@@ -30,12 +30,12 @@ ConstBlock block_of(const SupernodalLayout& l, int64_t s) {
 }
 
 // The kernels of a single-precision factor's sweeps with one right-hand side: L's entries widened
-// to double as they are read, every sum in double. Compiled twice, for x86-64-v3 (AVX2, FMA)
-// where the CPU has it and for the baseline, like the nonlinear shell's point kernels.
+// to double as they are read, every sum in double. Each is compiled twice, for x86-64-v3 (AVX2,
+// FMA) and for the baseline, and picked once (sweep_kernels()). Not by target_clones: a local
+// function's ifunc is resolved while the library is relocated, before a sanitizer's runtime is
+// up, and ThreadSanitizer's instrumented resolver crashes there.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define SOFTSHELL_SWEEP_KERNEL __attribute__((target_clones("arch=x86-64-v3", "default")))
-#else
-#define SOFTSHELL_SWEEP_KERNEL
+#define SOFTSHELL_SWEEP_V3 1
 #endif
 
 using Wide = double __attribute__((vector_size(32)));
@@ -57,8 +57,8 @@ using Narrow = float __attribute__((vector_size(16)));
 
 // y[0, n) += A (sign x), A's m columns `stride` apart (sign: +1 or -1, so y -= A x exactly as
 // a subtraction would round). Four columns a pass: y is read and written a quarter as often.
-SOFTSHELL_SWEEP_KERNEL void multiply_add(const float* a, int64_t stride, int64_t n, int64_t m, const double* x,
-                                         double sign, double* y) {
+[[gnu::always_inline]] inline void multiply_add_body(const float* a, int64_t stride, int64_t n, int64_t m,
+                                                     const double* x, double sign, double* y) {
   int64_t k = 0;
   for (; k + 4 <= m; k += 4) {
     const float *a0 = a + k * stride, *a1 = a0 + stride, *a2 = a1 + stride, *a3 = a2 + stride;
@@ -84,8 +84,8 @@ SOFTSHELL_SWEEP_KERNEL void multiply_add(const float* a, int64_t stride, int64_t
 }
 
 // y[0, m) -= A^T b, A (n x m) as above. Four columns a pass, each its own chain of sums.
-SOFTSHELL_SWEEP_KERNEL void subtract_transposed(const float* a, int64_t stride, int64_t n, int64_t m, const double* b,
-                                                double* y) {
+[[gnu::always_inline]] inline void subtract_transposed_body(const float* a, int64_t stride, int64_t n, int64_t m,
+                                                            const double* b, double* y) {
   auto finish = [](Wide w) { return (w[0] + w[1]) + (w[2] + w[3]); };
   int64_t k = 0;
   for (; k + 4 <= m; k += 4) {
@@ -123,6 +123,49 @@ SOFTSHELL_SWEEP_KERNEL void subtract_transposed(const float* a, int64_t stride, 
     for (; i < n; ++i) e += static_cast<double>(col[i]) * b[i];
     y[k] -= e;
   }
+}
+
+using MultiplyAdd = void (*)(const float*, int64_t, int64_t, int64_t, const double*, double, double*);
+using SubtractTransposed = void (*)(const float*, int64_t, int64_t, int64_t, const double*, double*);
+struct SweepKernels {
+  MultiplyAdd multiply_add;
+  SubtractTransposed subtract_transposed;
+};
+
+void multiply_add_baseline(const float* a, int64_t stride, int64_t n, int64_t m, const double* x, double sign,
+                           double* y) {
+  multiply_add_body(a, stride, n, m, x, sign, y);
+}
+void subtract_transposed_baseline(const float* a, int64_t stride, int64_t n, int64_t m, const double* b, double* y) {
+  subtract_transposed_body(a, stride, n, m, b, y);
+}
+#if defined(SOFTSHELL_SWEEP_V3)
+[[gnu::target("arch=x86-64-v3")]] void multiply_add_v3(const float* a, int64_t stride, int64_t n, int64_t m,
+                                                       const double* x, double sign, double* y) {
+  multiply_add_body(a, stride, n, m, x, sign, y);
+}
+[[gnu::target("arch=x86-64-v3")]] void subtract_transposed_v3(const float* a, int64_t stride, int64_t n, int64_t m,
+                                                              const double* b, double* y) {
+  subtract_transposed_body(a, stride, n, m, b, y);
+}
+#endif
+
+const SweepKernels& sweep_kernels() {
+  static const SweepKernels kernels = [] {
+#if defined(SOFTSHELL_SWEEP_V3)
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("x86-64-v3")) return SweepKernels{&multiply_add_v3, &subtract_transposed_v3};
+#endif
+    return SweepKernels{&multiply_add_baseline, &subtract_transposed_baseline};
+  }();
+  return kernels;
+}
+
+void multiply_add(const float* a, int64_t stride, int64_t n, int64_t m, const double* x, double sign, double* y) {
+  sweep_kernels().multiply_add(a, stride, n, m, x, sign, y);
+}
+void subtract_transposed(const float* a, int64_t stride, int64_t n, int64_t m, const double* b, double* y) {
+  sweep_kernels().subtract_transposed(a, stride, n, m, b, y);
 }
 
 // The diagonal blocks' triangular solves go by panels of this many columns: the small triangle
