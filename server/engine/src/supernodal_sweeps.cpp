@@ -53,7 +53,8 @@ using Narrow = float __attribute__((vector_size(16)));
   std::memcpy(&w, a, sizeof w);
   return w;
 }
-[[gnu::always_inline]] inline void store(double* a, Wide w) { std::memcpy(a, &w, sizeof w); }
+[[gnu::always_inline]] inline void store(double* a, const Wide& w) { std::memcpy(a, &w, sizeof w); }
+[[gnu::always_inline]] inline double sum_lanes(const Wide& w) { return (w[0] + w[1]) + (w[2] + w[3]); }
 
 // y[0, n) += A (sign x), A's m columns `stride` apart (sign: +1 or -1, so y -= A x exactly as
 // a subtraction would round). Four columns a pass: y is read and written a quarter as often.
@@ -86,7 +87,6 @@ using Narrow = float __attribute__((vector_size(16)));
 // y[0, m) -= A^T b, A (n x m) as above. Four columns a pass, each its own chain of sums.
 [[gnu::always_inline]] inline void subtract_transposed_body(const float* a, int64_t stride, int64_t n, int64_t m,
                                                             const double* b, double* y) {
-  auto finish = [](Wide w) { return (w[0] + w[1]) + (w[2] + w[3]); };
   int64_t k = 0;
   for (; k + 4 <= m; k += 4) {
     const float *a0 = a + k * stride, *a1 = a0 + stride, *a2 = a1 + stride, *a3 = a2 + stride;
@@ -99,7 +99,7 @@ using Narrow = float __attribute__((vector_size(16)));
       d2 += widen(a2 + i) * bi;
       d3 += widen(a3 + i) * bi;
     }
-    double e0 = finish(d0), e1 = finish(d1), e2 = finish(d2), e3 = finish(d3);
+    double e0 = sum_lanes(d0), e1 = sum_lanes(d1), e2 = sum_lanes(d2), e3 = sum_lanes(d3);
     for (; i < n; ++i) {
       e0 += static_cast<double>(a0[i]) * b[i];
       e1 += static_cast<double>(a1[i]) * b[i];
@@ -119,7 +119,7 @@ using Narrow = float __attribute__((vector_size(16)));
       d0 += widen(col + i) * load(b + i);
       d1 += widen(col + i + 4) * load(b + i + 4);
     }
-    double e = finish(d0 + d1);
+    double e = sum_lanes(d0 + d1);
     for (; i < n; ++i) e += static_cast<double>(col[i]) * b[i];
     y[k] -= e;
   }
