@@ -311,6 +311,7 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
   auto state = std::make_unique<State>();
   state->analysis = analysis;
   bool ok = false;
+  double min_diagonal = 0.0;  // min L_kk of a supernodal factor
   if (l->is_super) {
     // Ours (supernodal_numeric.h): into CHOLMOD's layout, given its values (a symbolic factor
     // fresh from the analysis has none yet).
@@ -325,6 +326,7 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
         l->is_ll = 1;
         l->minor = outcome.failed_column >= 0 ? static_cast<size_t>(outcome.failed_column) : l->n;
         ok = outcome.failed_column < 0;
+        min_diagonal = outcome.min_diagonal;
         failure.not_finite = outcome.not_finite;
       } else {
         failure.out_of_memory = c->status == CHOLMOD_OUT_OF_MEMORY;
@@ -366,7 +368,7 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
   if (state->plan) {
     state->layout = state->plan->layout(l);
     if (precision == SweepPrecision::kSingle) {
-      state->single = single_copy(state->layout, upper, executor);
+      state->single = single_copy(state->layout, upper, min_diagonal, executor);
       state->layout.single = state->single.get();
     }
   }
@@ -456,11 +458,7 @@ bool CholeskyFactor::State::own_forward(const Eigen::MatrixXd& rhs, Eigen::Matri
     fraction_read = route.whole ? 1.0 : static_cast<double>(route.work) / static_cast<double>(layout.entries());
     return true;
   }
-  by_columns(x, [&](auto& xs) {
-    for (int64_t s = 0; s < layout.supernodes; ++s) {
-      if (reached[static_cast<size_t>(s)]) forward_step(layout, s, xs);
-    }
-  });
+  by_columns(x, [&](auto& xs) { forward_sweep(layout, xs, reached); });
   fraction_read = static_cast<double>(route.work) / static_cast<double>(layout.entries());
   return true;
 }
@@ -483,7 +481,7 @@ Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* exe
     if (two_threads) {
       state_->sweeps()->backward(state_->layout, xs, *executor);
     } else {
-      for (int64_t s = state_->layout.supernodes; s-- > 0;) backward_step(state_->layout, s, xs);
+      backward_sweep(state_->layout, xs);
     }
   });
   const auto* perm = static_cast<const int*>(state_->l->Perm);

@@ -323,7 +323,7 @@ std::unique_ptr<CholeskyFactor> CholeskyFactor::factorize(const Eigen::SparseMat
       return nullptr;
     }
     state->min_pivot = outcome.min_diagonal * outcome.min_diagonal;
-    if (precision == SweepPrecision::kSingle) state->single = single_copy(state->layout(), upper, executor);
+    if (precision == SweepPrecision::kSingle) state->single = single_copy(state->layout(), upper, outcome.min_diagonal, executor);
     return std::unique_ptr<CholeskyFactor>(new CholeskyFactor(std::move(state)));
   } catch (const std::bad_alloc&) {
     failure.out_of_memory = true;
@@ -363,9 +363,7 @@ Eigen::MatrixXd CholeskyFactor::forward(const Eigen::MatrixXd& rhs, double* frac
       s.sweeps->forward(l, x, *executor, plan.whole ? nullptr : &reached);
       return;
     }
-    for (int64_t t = 0; t < l.supernodes; ++t) {
-      if (reached[static_cast<size_t>(t)]) forward_step(l, t, x);
-    }
+    forward_sweep(l, x, reached);
   };
   Eigen::MatrixXd out(s.n, rhs.cols());
   if (rhs.cols() == 1) {  // Eigen's vector kernels
@@ -391,7 +389,7 @@ Eigen::MatrixXd CholeskyFactor::backward(const Eigen::MatrixXd& y, Executor* exe
       s.sweeps->backward(l, x, *executor);
       return;
     }
-    for (int64_t t = l.supernodes; t-- > 0;) backward_step(l, t, x);
+    backward_sweep(l, x);
   };
   Eigen::MatrixXd out(y.rows(), y.cols());
   if (y.cols() == 1) {

@@ -261,8 +261,20 @@ void backward_step(const SupernodalLayout& l, int64_t s, X& x) {
   block.topRows(ncols).template triangularView<Eigen::Lower>().transpose().solveInPlace(xs);
 }
 
+template <class X>
+void forward_sweep(const SupernodalLayout& l, X& x, const std::vector<char>& reached) {
+  for (int64_t s = 0; s < l.supernodes; ++s) {
+    if (reached[static_cast<size_t>(s)]) forward_step(l, s, x);
+  }
+}
+
+template <class X>
+void backward_sweep(const SupernodalLayout& l, X& x) {
+  for (int64_t s = l.supernodes; s-- > 0;) backward_step(l, s, x);
+}
+
 std::unique_ptr<float[]> single_copy(const SupernodalLayout& l, const Eigen::SparseMatrix<double>& upper,
-                                     Executor* executor) {
+                                     double min_diagonal, Executor* executor) {
   // Well inside float's range (about 1e-38 to 3e38), so that sums of a few products stay in it too.
   constexpr double kLargest = 1e30, kSmallestPivot = 1e-30;
   double largest_diagonal = 0.0;
@@ -274,13 +286,7 @@ std::unique_ptr<float[]> single_copy(const SupernodalLayout& l, const Eigen::Spa
       if (inner[p] == j) largest_diagonal = std::max(largest_diagonal, upper.valuePtr()[p]);
     }
   }
-  if (!(std::sqrt(largest_diagonal) < kLargest)) return nullptr;
-  for (int64_t s = 0; s < l.supernodes; ++s) {
-    const int64_t nrows = l.row_start[s + 1] - l.row_start[s];
-    for (int64_t j = 0; j < l.first[s + 1] - l.first[s]; ++j) {
-      if (!(std::abs(l.values[l.value_start[s] + j * nrows + j]) > kSmallestPivot)) return nullptr;
-    }
-  }
+  if (!(std::sqrt(largest_diagonal) < kLargest) || !(min_diagonal > kSmallestPivot)) return nullptr;
   const int64_t n = l.entries();
   std::unique_ptr<float[]> out(new float[static_cast<size_t>(std::max<int64_t>(n, 1))]);
   const int parts = executor && executor->concurrency() > 1 && n >= g_two_thread_sweep_entries.load() ? 2 : 1;
@@ -463,6 +469,10 @@ template void forward_step(const SupernodalLayout&, int64_t, Eigen::VectorXd&);
 template void forward_step(const SupernodalLayout&, int64_t, Eigen::MatrixXd&);
 template void backward_step(const SupernodalLayout&, int64_t, Eigen::VectorXd&);
 template void backward_step(const SupernodalLayout&, int64_t, Eigen::MatrixXd&);
+template void forward_sweep(const SupernodalLayout&, Eigen::VectorXd&, const std::vector<char>&);
+template void forward_sweep(const SupernodalLayout&, Eigen::MatrixXd&, const std::vector<char>&);
+template void backward_sweep(const SupernodalLayout&, Eigen::VectorXd&);
+template void backward_sweep(const SupernodalLayout&, Eigen::MatrixXd&);
 template void TwoThreadSweeps::forward(const SupernodalLayout&, Eigen::VectorXd&, Executor&,
                                        const std::vector<char>*) const;
 template void TwoThreadSweeps::forward(const SupernodalLayout&, Eigen::MatrixXd&, Executor&,

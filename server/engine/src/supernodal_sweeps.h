@@ -99,9 +99,9 @@ inline bool on_two_threads(const TwoThreadSweeps* plan, const Executor* executor
 /// L's values rounded to single precision (for SupernodalLayout::single), converted on two of the
 /// executor's threads if it has them and the factor is large. Null where they would leave float's
 /// range: every |L_ij| is at most sqrt(A_ii) (`upper`: A's upper triangle, diagonal included), and
-/// every pivot L_kk must stay a normal float.
+/// every pivot L_kk (the smallest: `min_diagonal`, the factorization's) must stay a normal float.
 std::unique_ptr<float[]> single_copy(const SupernodalLayout& l, const Eigen::SparseMatrix<double>& upper,
-                                     Executor* executor);
+                                     double min_diagonal, Executor* executor);
 
 /// One supernode's step of a sweep on one thread (the backends' own sweeps and the plan's share
 /// them, so the arithmetic is the same).
@@ -109,5 +109,12 @@ template <class X>
 void forward_step(const SupernodalLayout& l, int64_t s, X& x);
 template <class X>
 void backward_step(const SupernodalLayout& l, int64_t s, X& x);
+
+/// The backends' sweeps on one thread: x := L^-1 x over the supernodes flagged in `reached` (all
+/// that the sweep reaches: reach()), and x := L^-T x.
+template <class X>
+void forward_sweep(const SupernodalLayout& l, X& x, const std::vector<char>& reached);
+template <class X>
+void backward_sweep(const SupernodalLayout& l, X& x);
 
 }  // namespace softshell::engine::internal
