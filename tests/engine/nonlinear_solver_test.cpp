@@ -311,35 +311,33 @@ TEST(NonlinearSolver, TheCountedRefreshRuleGivesTheSameAnswersOnASlowerHost) {
   }
 }
 
-// The load steps a test's filter saw (from, to, failed by it), and how many of those that reach
-// the request's end it still fails.
-struct LoadStepRecord {
-  double from, to;
-  bool failed;
-};
-std::vector<LoadStepRecord> g_load_steps;
+// How many of the load steps that reach the request's end a test's filter still fails.
 int g_failing_ends = 0;
 
 // A load step that fails is tried again at half its length from the same start. After two
 // converged halves the nominal step is twice what is left to the request's end, so halving the
 // nominal step instead tried the very load step that had just failed again (the solver repeated
 // failed load steps up to eight times in a row at spot_quadrangulated's limit points).
+// The helmet's grab from rest is a hard first load step (its residual stays near 1 for a few
+// iterations): round-off in the preconditioner decides whether it converges or is split, so
+// every failure is checked, the test hook's and the solver's own.
 TEST(NonlinearSolver, AFailedLoadStepIsTriedAgainAtHalfItsLength) {
   const ControlMesh helmet = test::load_asset_mesh("catmark_helmet.obj");
   auto model = ShellModel::build(helmet, material()).value();
   DeformationRequest request = helmet_grab(helmet);
   const Vec3 full = request.limit_constraints[0].displacement;
   request.limit_constraints[0].displacement = 0.05 * full;
-  NonlinearSolver plain(model, std::make_shared<FactorCache>()), failing(model, std::make_shared<FactorCache>());
+  std::vector<NonlinearLoadStep> seen;
+  NonlinearOptions observed;
+  observed.on_load_step = [&seen](const NonlinearLoadStep& step) { seen.push_back(step); };
+  NonlinearSolver plain(model, std::make_shared<FactorCache>()), failing(model, std::make_shared<FactorCache>(), observed);
   auto expected = plain.solve(request);
   ASSERT_TRUE(expected.ok()) << expected.error().message;
-  g_load_steps.clear();
   g_failing_ends = 2;
   auto answer = [&] {
-    const test::ScopedKnob<internal::LoadStepFilter> filter(internal::g_fail_load_step, +[](double from, double to) {
+    const test::ScopedKnob<internal::LoadStepFilter> filter(internal::g_fail_load_step, +[](double, double to) {
       const bool fail = to == 1.0 && g_failing_ends > 0;
       if (fail) --g_failing_ends;
-      g_load_steps.push_back({from, to, fail});
       return fail;
     });
     return failing.solve(request);
@@ -349,20 +347,21 @@ TEST(NonlinearSolver, AFailedLoadStepIsTriedAgainAtHalfItsLength) {
   EXPECT_LE(answer->stats.check_ratio, 1.0);
   EXPECT_LT((answer->displacement - expected->displacement).norm(), 1e-6 * expected->displacement.norm());
   EXPECT_EQ(g_failing_ends, 0);
-  ASSERT_GE(g_load_steps.size(), 5u);
-  EXPECT_EQ(answer->stats.load_steps, static_cast<int>(g_load_steps.size()));
+  ASSERT_GE(seen.size(), 5u);
+  EXPECT_EQ(answer->stats.load_steps, static_cast<int>(seen.size()));
   // Each attempt after a failed one starts where it did and goes half as far.
-  for (size_t k = 1; k < g_load_steps.size(); ++k) {
-    const LoadStepRecord &before = g_load_steps[k - 1], &now = g_load_steps[k];
-    if (!before.failed) {
+  for (size_t k = 1; k < seen.size(); ++k) {
+    const NonlinearLoadStep &before = seen[k - 1], &now = seen[k];
+    if (before.converged) {
       EXPECT_EQ(now.from, before.to) << "load step " << k;
       continue;
     }
     EXPECT_EQ(now.from, before.from) << "load step " << k;
-    EXPECT_DOUBLE_EQ(now.to - now.from, 0.5 * (before.to - before.from)) << "load step " << k;
+    // (Lengths are differences of nearby fractions: equal to their round-off.)
+    EXPECT_NEAR(now.to - now.from, 0.5 * (before.to - before.from), 1e-14) << "load step " << k;
   }
-  EXPECT_EQ(g_load_steps.back().to, 1.0);
-  EXPECT_FALSE(g_load_steps.back().failed);
+  EXPECT_EQ(seen.back().to, 1.0);
+  EXPECT_TRUE(seen.back().converged);
 }
 
 // NonlinearOptions::on_load_step sees every load step as it ends, and what they report adds up to
@@ -390,7 +389,7 @@ TEST(NonlinearSolver, TheLoadStepObserverSeesEveryLoadStep) {
   ASSERT_TRUE(answer.ok()) << answer.error().message;
   const NonlinearStats& stats = answer->stats;
   ASSERT_EQ(static_cast<int>(seen.size()), stats.load_steps);
-  int iterations = 0, trust = 0, krylov = 0, factorizations = 0, failed = 0;
+  int iterations = 0, trust = 0, krylov = 0, factorizations = 0, failed_by_hook = 0;
   double lambda = 0.0;  // where the next load step starts
   for (size_t k = 0; k < seen.size(); ++k) {
     const NonlinearLoadStep& step = seen[k];
@@ -401,18 +400,20 @@ TEST(NonlinearSolver, TheLoadStepObserverSeesEveryLoadStep) {
     EXPECT_EQ(step.from, lambda) << "load step " << k;
     EXPECT_GT(step.to, step.from) << "load step " << k;
     EXPECT_GE(step.ms, 0.0);
-    if (!step.converged) {
-      ++failed;  // by the hook, before any iteration
+    if (!step.converged && step.residuals.empty()) {
+      ++failed_by_hook;  // before any iteration
       EXPECT_EQ(step.iterations, 0);
-      EXPECT_TRUE(step.residuals.empty());
       continue;
     }
-    lambda = step.to;
+    // The rest iterated: converged, or (the first load step from rest, as round-off decides; see
+    // AFailedLoadStepIsTriedAgainAtHalfItsLength) failed and split.
     ASSERT_FALSE(step.residuals.empty()) << "load step " << k;
     EXPECT_GE(static_cast<int>(step.residuals.size()), step.iterations + 1) << "load step " << k;
+    if (!step.converged) continue;
+    lambda = step.to;
     EXPECT_LE(step.residuals.back(), step.to < 1.0 ? 1e-2 : 1e-8) << "load step " << k;
   }
-  EXPECT_EQ(failed, 2);
+  EXPECT_EQ(failed_by_hook, 2);
   EXPECT_EQ(lambda, 1.0);
   EXPECT_GE(seen.size(), 4u);
   EXPECT_EQ(seen.back().residuals.back(), stats.residual);
@@ -450,7 +451,8 @@ TEST(NonlinearSolver, TheLoadStepObserverSeesEveryLoadStep) {
 // hands over to trust-region steps on the energy, which carry it to the answer. Here the Newton
 // directions are cut to a tenth while the residual is between 1e-4 and 1e-2, where the rule acts
 // (so Newton gains only a tenth an iteration there): without the hand-over every load step failed
-// and the request was refused.
+// and the request was refused. (The unspoilt solve may take trust-region steps of its own in its
+// hard first load step, as round-off decides: AFailedLoadStepIsTriedAgainAtHalfItsLength.)
 TEST(NonlinearSolver, NewtonThatStopsGainingNearAnAnswerHandsOverToTrustRegionSteps) {
   const ControlMesh helmet = test::load_asset_mesh("catmark_helmet.obj");
   auto model = ShellModel::build(helmet, material()).value();
@@ -458,7 +460,6 @@ TEST(NonlinearSolver, NewtonThatStopsGainingNearAnAnswerHandsOverToTrustRegionSt
   request.limit_constraints[0].displacement *= 0.05;
   auto expected = NonlinearSolver(model, std::make_shared<FactorCache>()).solve(request);
   ASSERT_TRUE(expected.ok()) << expected.error().message;
-  EXPECT_EQ(expected->stats.trust_region_steps, 0);
   auto answer = [&] {
     const test::ScopedKnob<internal::DirectionSpoiler> spoil(
         internal::g_spoil_newton_direction, +[](double residual, Eigen::VectorXd& direction) {
