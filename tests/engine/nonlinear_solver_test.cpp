@@ -357,7 +357,7 @@ TEST(NonlinearSolver, AFailedLoadStepIsTriedAgainAtHalfItsLength) {
       continue;
     }
     EXPECT_EQ(now.from, before.from) << "load step " << k;
-    // (Lengths are differences of nearby fractions: equal to their round-off.)
+    // (The lengths are differences of nearby fractions: equal only to round-off.)
     EXPECT_NEAR(now.to - now.from, 0.5 * (before.to - before.from), 1e-14) << "load step " << k;
   }
   EXPECT_EQ(seen.back().to, 1.0);
