@@ -277,15 +277,7 @@ std::unique_ptr<float[]> single_copy(const SupernodalLayout& l, const Eigen::Spa
                                      double min_diagonal, Executor* executor) {
   // Well inside float's range (about 1e-38 to 3e38), so that sums of a few products stay in it too.
   constexpr double kLargest = 1e30, kSmallestPivot = 1e-30;
-  double largest_diagonal = 0.0;
-  const int* outer = upper.outerIndexPtr();
-  const int* inner = upper.innerIndexPtr();
-  for (Eigen::Index j = 0; j < upper.outerSize(); ++j) {
-    const int end = upper.isCompressed() ? outer[j + 1] : outer[j] + upper.innerNonZeroPtr()[j];
-    for (int p = end; p-- > outer[j] && inner[p] >= j;) {  // rows ascending: the diagonal is last
-      if (inner[p] == j) largest_diagonal = std::max(largest_diagonal, upper.valuePtr()[p]);
-    }
-  }
+  const double largest_diagonal = upper.rows() > 0 ? upper.diagonal().maxCoeff() : 0.0;
   if (!(std::sqrt(largest_diagonal) < kLargest) || !(min_diagonal > kSmallestPivot)) return nullptr;
   const int64_t n = l.entries();
   std::unique_ptr<float[]> out(new float[static_cast<size_t>(std::max<int64_t>(n, 1))]);
